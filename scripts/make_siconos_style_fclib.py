@@ -1,0 +1,226 @@
+#!/usr/bin/env python3
+"""Writes the small FCLIB test files in tests/data/fclib/ (run from anywhere; needs python3-h5py).
+
+The files mirror the HDF5 layout that libfclib's fclib_write_local produces (checked with
+h5dump against libfclib 3.1): groups /fclib_local/{W,vectors,info}, int32 1-element datasets
+for sizes, float64 data, fixed-length NUL-terminated ASCII strings for the info text. Siconos
+Numerics writes local problems through that same function, so what differs between tools is
+only the CONTENT of W (fclib_matrix fields nzmax, m, n, p, i, x, nz):
+  - Siconos, dense W (frictionContact_fclib_write, NM_DENSE): compressed rows (nz = -2),
+    nzmax = m*n, every entry stored, p = row pointers, i = column indices;
+  - Siconos, sparse-block W (NM_SPARSE_BLOCK -> SBM_to_sparse): compressed rows of the
+    non-zero 3x3 blocks, zeros inside a stored block included;
+  - Siconos/CSparse triplet: rows in `i`, columns in `p` (fclib.h documents the opposite),
+    the arrays written with nz entries while nzmax may be larger (CSparse growth);
+  - fclib.h's documented triplet: rows in `p`, columns in `i`;
+  - compressed columns (nz = -1), which is what HapCo writes.
+Siconos also stores the number of degrees of freedom as an int attribute of /fclib_local/info.
+
+Every problem is the same hand-written 3-contact problem (W 9x9, q, mu below), copied by
+hand into tests/unit/fclib/fclib_io_test.cc. The bad_*.hdf5 files each break one rule.
+"""
+import os
+import sys
+
+import h5py
+import numpy as np
+
+# The known problem (local coordinates [normal, t1, t2] per contact). Symmetric, strictly
+# diagonally dominant (hence positive definite); block (0,2) is zero.
+W = np.zeros((9, 9))
+W[0:3, 0:3] = [[2.0, 0.1, 0.0], [0.1, 1.0, 0.0], [0.0, 0.0, 1.0]]
+W[3:6, 3:6] = [[3.0, 0.0, 0.2], [0.0, 1.5, 0.0], [0.2, 0.0, 1.5]]
+W[6:9, 6:9] = [[1.0, 0.0, 0.0], [0.0, 0.5, 0.0], [0.0, 0.0, 0.5]]
+W[0:3, 3:6] = [[0.5, 0.0, 0.0], [0.0, 0.25, 0.0], [0.0, 0.0, 0.0]]
+W[3:6, 6:9] = [[0.25, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.1]]
+W[3:6, 0:3] = W[0:3, 3:6].T
+W[6:9, 3:6] = W[3:6, 6:9].T
+Q = np.array([-1.0, 0.5, -0.25, -0.5, 0.1, 0.0, 0.75, 0.0, 0.0])
+MU = np.array([0.3, 0.5, 0.8])
+assert np.array_equal(W, W.T)
+
+
+def int1(group, name, value):
+    group.create_dataset(name, data=np.array([value], dtype="<i4"), track_times=False)
+
+
+def ints(group, name, values):
+    group.create_dataset(name, data=np.asarray(values, dtype="<i4"), track_times=False)
+
+
+def doubles(group, name, values):
+    group.create_dataset(name, data=np.asarray(values, dtype="<f8"), track_times=False)
+
+
+def fixed_string(group, name, text):
+    """Scalar, fixed-length, NUL-terminated ASCII: what H5LTmake_dataset_string writes."""
+    raw = text.encode("ascii")
+    tid = h5py.h5t.C_S1.copy()
+    tid.set_size(len(raw) + 1)
+    tid.set_strpad(h5py.h5t.STR_NULLTERM)
+    space = h5py.h5s.create(h5py.h5s.SCALAR)
+    dcpl = h5py.h5p.create(h5py.h5p.DATASET_CREATE)
+    dcpl.set_obj_track_times(False)  # reproducible files
+    dset = h5py.h5d.create(group.id, name.encode("ascii"), tid, space, dcpl=dcpl)
+    dset.write(h5py.h5s.ALL, h5py.h5s.ALL, np.array(raw + b"\0", dtype="S%d" % (len(raw) + 1)))
+
+
+def write_matrix(group, m, n, nz, nzmax, p, i, x):
+    int1(group, "nzmax", nzmax)
+    int1(group, "m", m)
+    int1(group, "n", n)
+    int1(group, "nz", nz)
+    ints(group, "p", p)
+    ints(group, "i", i)
+    doubles(group, "x", x)
+
+
+def csr(a, keep):
+    """Compressed rows of the entries where keep[r, c] is true (row pointers p, columns i)."""
+    p, i, x = [0], [], []
+    for r in range(a.shape[0]):
+        for c in range(a.shape[1]):
+            if keep[r, c]:
+                i.append(c)
+                x.append(a[r, c])
+        p.append(len(i))
+    return p, i, x
+
+
+def csc(a):
+    p, i, x = [0], [], []
+    for c in range(a.shape[1]):
+        for r in range(a.shape[0]):
+            if a[r, c] != 0.0:
+                i.append(r)
+                x.append(a[r, c])
+        p.append(len(i))
+    return p, i, x
+
+
+def local_file(path, w_writer, q=Q, mu=MU, spacedim=3, info=None, ndof=None):
+    with h5py.File(path, "w") as f:
+        top = f.create_group("fclib_local")
+        int1(top, "spacedim", spacedim)
+        w_writer(top.create_group("W"))
+        vec = top.create_group("vectors")
+        doubles(vec, "q", q)
+        doubles(vec, "mu", mu)
+        if info is not None:
+            g = top.create_group("info")
+            for key in ("title", "description", "math_info"):
+                if key in info:
+                    fixed_string(g, key, info[key])
+            if ndof is not None:
+                g.attrs.create("numberOfDegreeOfFreedom", ndof, dtype="<i4")
+
+
+def siconos_dense(g):
+    p, i, x = csr(W, np.ones(W.shape, dtype=bool))
+    write_matrix(g, 9, 9, -2, 81, p, i, x)
+
+
+def block_mask():
+    keep = np.zeros(W.shape, dtype=bool)
+    for a in range(3):
+        for b in range(3):
+            if np.any(W[3 * a:3 * a + 3, 3 * b:3 * b + 3] != 0.0):
+                keep[3 * a:3 * a + 3, 3 * b:3 * b + 3] = True
+    return keep
+
+
+def siconos_sbm(g):
+    p, i, x = csr(W, block_mask())
+    write_matrix(g, 9, 9, -2, len(x), p, i, x)
+
+
+def triplet_entries(order):
+    """Non-zero (row, col, value), column-major ('col') or row-major ('row') order."""
+    rows, cols = np.nonzero(W.T if order == "col" else W)
+    if order == "col":
+        rows, cols = cols, rows
+    return [(int(r), int(c), float(W[r, c])) for r, c in zip(rows, cols)]
+
+
+def siconos_triplet(g):
+    e = triplet_entries("col")
+    # CSparse/Siconos: i = row indices, p = column indices; nzmax from CSparse growth.
+    write_matrix(g, 9, 9, len(e), len(e) + 4, [c for _, c, _ in e], [r for r, _, _ in e],
+                 [v for _, _, v in e])
+
+
+def documented_triplet(g):
+    e = triplet_entries("row")
+    # fclib.h: p = row indices, i = column indices.
+    write_matrix(g, 9, 9, len(e), len(e), [r for r, _, _ in e], [c for _, c, _ in e],
+                 [v for _, _, v in e])
+
+
+def csc_writer(g):
+    p, i, x = csc(W)
+    write_matrix(g, 9, 9, -1, len(x), p, i, x)
+
+
+def upper_triangle_triplet(g):
+    e = [t for t in triplet_entries("col") if t[0] <= t[1]]
+    write_matrix(g, 9, 9, len(e), len(e), [c for _, c, _ in e], [r for r, _, _ in e],
+                 [v for _, _, v in e])
+
+
+def short_x_csc(g):
+    p, i, x = csc(W)
+    write_matrix(g, 9, 9, -1, len(x), p, i, x[:-3])  # x shorter than nzmax
+
+
+def main():
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    out = os.path.join(root, "tests", "data", "fclib")
+    if len(sys.argv) > 1:
+        out = sys.argv[1]
+    os.makedirs(out, exist_ok=True)
+    path = lambda name: os.path.join(out, name)
+    info = {"title": "HapCo 3-contact test problem",
+            "description": "hand-written W, q, mu (scripts/make_siconos_style_fclib.py)",
+            "math_info": "W symmetric positive definite"}
+
+    local_file(path("siconos_dense_csr.hdf5"), siconos_dense, info=info, ndof=18)
+    local_file(path("siconos_sbm_csr.hdf5"), siconos_sbm, info=info, ndof=18)
+    local_file(path("siconos_triplet.hdf5"), siconos_triplet, info=info, ndof=18)
+    local_file(path("documented_triplet.hdf5"), documented_triplet)
+    local_file(path("csc_with_solution.hdf5"), csc_writer, info={"title": "with solution"})
+    with h5py.File(path("csc_with_solution.hdf5"), "a") as f:
+        s = f.create_group("solution")
+        doubles(s, "u", [0.5 * k for k in range(9)])
+        doubles(s, "r", [1.0 + k for k in range(9)])
+
+    # One broken rule per file.
+    local_file(path("bad_upper_triangle_triplet.hdf5"), upper_triangle_triplet)
+    local_file(path("bad_spacedim2.hdf5"), csc_writer, spacedim=2)
+    local_file(path("bad_nan_q.hdf5"), csc_writer, q=np.where(np.arange(9) == 4, np.nan, Q))
+    local_file(path("bad_short_x.hdf5"), short_x_csc)
+    local_file(path("bad_mu_size.hdf5"), csc_writer, mu=MU[:2])
+    local_file(path("bad_vlen_title.hdf5"), csc_writer, info={})
+    with h5py.File(path("bad_vlen_title.hdf5"), "a") as f:  # h5py's default str is vlen
+        f["fclib_local/info"].create_dataset("title", data="variable-length title")
+    local_file(path("bad_with_vr.hdf5"), csc_writer)
+    with h5py.File(path("bad_with_vr.hdf5"), "a") as f:
+        for name in ("V", "R"):
+            g = f["fclib_local"].create_group(name)
+            write_matrix(g, 9 if name == "V" else 1, 1, -1, 1, [0, 1], [0], [1.0])
+        doubles(f["fclib_local/vectors"], "s", [0.0])
+    with h5py.File(path("bad_global.hdf5"), "w") as f:  # a global problem (M, H, f, w, mu)
+        top = f.create_group("fclib_global")
+        int1(top, "spacedim", 3)
+        write_matrix(top.create_group("M"), 3, 3, -1, 3, [0, 1, 2, 3], [0, 1, 2], [1.0] * 3)
+        write_matrix(top.create_group("H"), 3, 3, -1, 3, [0, 1, 2, 3], [0, 1, 2], [1.0] * 3)
+        vec = top.create_group("vectors")
+        doubles(vec, "f", [0.0, 0.0, -1.0])
+        doubles(vec, "w", [0.0, 0.0, 0.0])
+        doubles(vec, "mu", [0.5])
+    with h5py.File(path("bad_not_fclib.hdf5"), "w") as f:
+        doubles(f.create_group("something_else"), "data", [1.0, 2.0])
+    print("wrote FCLIB test files to", out)
+
+
+if __name__ == "__main__":
+    main()

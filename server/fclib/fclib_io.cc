@@ -1,0 +1,618 @@
+#include "fclib/fclib_io.h"
+
+#include "fclib/fclib_c.h"
+#include <hdf5.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <memory>
+#include <sstream>
+#include <utility>
+#include <vector>
+
+#include "common/error.h"
+#include "fclib/fclib_matrix.h"
+
+namespace hapco::fclib {
+namespace {
+
+// HDF5 prints its error stack on every failed call unless told not to; our callers get an
+// InputError instead. Process-wide, once.
+void SilenceHdf5() {
+  static const bool silenced = [] {
+    H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr);
+    return true;
+  }();
+  (void)silenced;
+}
+
+[[noreturn]] void Fail(const std::string& path, const std::string& what) {
+  throw InputError("FCLIB file '" + path + "': " + what);
+}
+
+// RAII for an HDF5 identifier.
+class H5Id {
+ public:
+  using Closer = herr_t (*)(hid_t);
+  H5Id(hid_t id, Closer closer) : id_(id), closer_(closer) {}
+  H5Id(const H5Id&) = delete;
+  H5Id& operator=(const H5Id&) = delete;
+  ~H5Id() {
+    if (id_ >= 0) closer_(id_);
+  }
+  hid_t get() const { return id_; }
+  bool valid() const { return id_ >= 0; }
+  // Closes now (libfclib opens the file itself afterwards).
+  void Close() {
+    if (id_ >= 0) closer_(id_);
+    id_ = -1;
+  }
+
+ private:
+  hid_t id_;
+  Closer closer_;
+};
+
+// RAII for what libfclib allocates.
+struct LocalDeleter {
+  void operator()(fclib_local* problem) const {
+    fclib_delete_local(problem);  // frees the members, not the struct
+    std::free(problem);           // NOLINT: allocated by libfclib with calloc
+  }
+};
+struct SolutionDeleter {
+  void operator()(fclib_solution* solution) const { fclib_delete_solutions(solution, 1); }
+};
+using LocalPtr = std::unique_ptr<fclib_local, LocalDeleter>;
+using SolutionPtr = std::unique_ptr<fclib_solution, SolutionDeleter>;
+
+// --- Inspection of the HDF5 layout (so that libfclib, which exits on errors, never fails) ---
+
+// True when every component of the absolute path `name` exists (H5Lexists fails, rather than
+// answering false, when an intermediate group is missing).
+bool Exists(hid_t file, const std::string& name) {
+  std::string prefix;
+  std::size_t start = 1;
+  while (start <= name.size()) {
+    const std::size_t end = name.find('/', start);
+    prefix = name.substr(0, end);
+    if (H5Lexists(file, prefix.c_str(), H5P_DEFAULT) <= 0) return false;
+    if (end == std::string::npos) break;
+    start = end + 1;
+  }
+  return true;
+}
+
+H5I_type_t ObjectType(hid_t file, const std::string& name) {
+  if (!Exists(file, name)) return H5I_BADID;
+  H5Id object(H5Oopen(file, name.c_str(), H5P_DEFAULT), H5Oclose);
+  if (!object.valid()) return H5I_BADID;
+  return H5Iget_type(object.get());
+}
+
+void RequireGroup(hid_t file, const std::string& path, const std::string& name) {
+  const H5I_type_t type = ObjectType(file, name);
+  if (type == H5I_BADID) Fail(path, "missing group " + name);
+  if (type != H5I_GROUP) Fail(path, name + " is not a group");
+}
+
+struct DatasetShape {
+  H5T_class_t type_class = H5T_NO_CLASS;
+  long points = 0;
+  std::size_t type_size = 0;
+  bool variable_string = false;
+};
+
+DatasetShape InspectDataset(hid_t file, const std::string& path, const std::string& name) {
+  const H5I_type_t type = ObjectType(file, name);
+  if (type == H5I_BADID) Fail(path, "missing dataset " + name);
+  if (type != H5I_DATASET) Fail(path, name + " is not a dataset");
+  H5Id dataset(H5Dopen2(file, name.c_str(), H5P_DEFAULT), H5Dclose);
+  H5Id datatype(H5Dget_type(dataset.get()), H5Tclose);
+  H5Id space(H5Dget_space(dataset.get()), H5Sclose);
+  if (!dataset.valid() || !datatype.valid() || !space.valid()) Fail(path, "cannot open " + name);
+  DatasetShape shape;
+  shape.type_class = H5Tget_class(datatype.get());
+  shape.type_size = H5Tget_size(datatype.get());
+  shape.points = static_cast<long>(H5Sget_simple_extent_npoints(space.get()));
+  shape.variable_string =
+      shape.type_class == H5T_STRING && H5Tis_variable_str(datatype.get()) > 0;
+  return shape;
+}
+
+DatasetShape RequireIntegers(hid_t file, const std::string& path, const std::string& name) {
+  const DatasetShape shape = InspectDataset(file, path, name);
+  if (shape.type_class != H5T_INTEGER) Fail(path, name + " must hold integers");
+  return shape;
+}
+
+DatasetShape RequireNumbers(hid_t file, const std::string& path, const std::string& name,
+                            long points) {
+  const DatasetShape shape = InspectDataset(file, path, name);
+  if (shape.type_class != H5T_FLOAT && shape.type_class != H5T_INTEGER) {
+    Fail(path, name + " must hold numbers");
+  }
+  if (points >= 0 && shape.points != points) {
+    std::ostringstream msg;
+    msg << name << " has " << shape.points << " entries, expected " << points;
+    Fail(path, msg.str());
+  }
+  return shape;
+}
+
+int ReadInt(hid_t file, const std::string& path, const std::string& name) {
+  const DatasetShape shape = RequireIntegers(file, path, name);
+  if (shape.points != 1) Fail(path, name + " must hold exactly one integer");
+  H5Id dataset(H5Dopen2(file, name.c_str(), H5P_DEFAULT), H5Dclose);
+  int value = 0;
+  if (H5Dread(dataset.get(), H5T_NATIVE_INT, H5S_ALL, H5S_ALL, H5P_DEFAULT, &value) < 0) {
+    Fail(path, "cannot read " + name);
+  }
+  return value;
+}
+
+// Size in bytes of a fixed-length string dataset (libfclib reads it with H5LT into a buffer
+// of that size: a variable-length string or an array of strings would be read wrongly).
+std::size_t RequireOptionalString(hid_t file, const std::string& path,
+                                  const std::string& name) {
+  if (!Exists(file, name)) return 0;
+  const DatasetShape shape = InspectDataset(file, path, name);
+  if (shape.type_class != H5T_STRING || shape.variable_string || shape.points != 1) {
+    Fail(path, name + " must be one fixed-length string (as H5LTmake_dataset_string writes)");
+  }
+  return shape.type_size;
+}
+
+struct LocalLayout {
+  int m = 0, n = 0, nz = 0, nzmax = 0;
+  long x_points = 0;
+  std::size_t title_size = 0, description_size = 0, math_info_size = 0;
+};
+
+// Checks everything fclib_read_local / fclib_read_solution will read, with the sizes their
+// buffers get (libfclib sizes each buffer from m, n, nz, nzmax and reads whole datasets).
+LocalLayout CheckLocalLayout(hid_t file, const std::string& path) {
+  if (!Exists(file, "/fclib_local")) {
+    if (Exists(file, "/fclib_global")) {
+      Fail(path, "holds a global problem (/fclib_global: M, H, G, f, w); HapCo reads local "
+                 "problems (/fclib_local: W, q, mu) only");
+    }
+    Fail(path, "is an HDF5 file but not an FCLIB local problem (no /fclib_local group)");
+  }
+  RequireGroup(file, path, "/fclib_local");
+  const int spacedim = ReadInt(file, path, "/fclib_local/spacedim");
+  if (spacedim != 3) {
+    Fail(path, "spacedim is " + std::to_string(spacedim) +
+                   "; HapCo solves 3D contact problems (spacedim 3) only");
+  }
+  if (Exists(file, "/fclib_local/V") || Exists(file, "/fclib_local/R")) {
+    Fail(path, "has V and R (a mixed problem with equality constraints); only plain local "
+               "problems (W, q, mu) are supported");
+  }
+  RequireGroup(file, path, "/fclib_local/W");
+  LocalLayout layout;
+  layout.nzmax = ReadInt(file, path, "/fclib_local/W/nzmax");
+  layout.m = ReadInt(file, path, "/fclib_local/W/m");
+  layout.n = ReadInt(file, path, "/fclib_local/W/n");
+  layout.nz = ReadInt(file, path, "/fclib_local/W/nz");
+  const int m = layout.m, n = layout.n, nz = layout.nz, nzmax = layout.nzmax;
+  std::ostringstream msg;
+  if (m != n) {
+    msg << "W is " << m << "x" << n << "; it must be square (3m x 3m for m contacts)";
+    Fail(path, msg.str());
+  }
+  if (m <= 0) Fail(path, "W has " + std::to_string(m) + " rows: the problem has no contacts");
+  if (m % 3 != 0) {
+    Fail(path, "W has " + std::to_string(m) + " rows, not a multiple of 3 (spacedim 3)");
+  }
+  if (m / 3 > kMaxContacts) {
+    msg << "has " << m / 3 << " contacts; at most " << kMaxContacts
+        << " are supported (W is stored dense)";
+    Fail(path, msg.str());
+  }
+  if (nz < -2) {
+    Fail(path, "W/nz is " + std::to_string(nz) +
+                   "; expected -1 (compressed columns), -2 (compressed rows) or >= 0 (triplet)");
+  }
+  if (nzmax < 0) Fail(path, "W/nzmax is negative");
+  const DatasetShape p = RequireIntegers(file, path, "/fclib_local/W/p");
+  const DatasetShape i = RequireIntegers(file, path, "/fclib_local/W/i");
+  const DatasetShape x = RequireNumbers(file, path, "/fclib_local/W/x", -1);
+  const long p_expected = nz >= 0 ? nz : static_cast<long>(n) + 1;  // n == m
+  const long i_expected = nz >= 0 ? nz : nzmax;
+  if (p.points != p_expected || i.points != i_expected) {
+    msg << "W/p and W/i have " << p.points << " and " << i.points << " entries; "
+        << (nz >= 0 ? "a triplet W with nz = " : "a compressed W with nzmax = ")
+        << (nz >= 0 ? nz : nzmax) << " needs " << p_expected << " and " << i_expected;
+    Fail(path, msg.str());
+  }
+  // libfclib reads all of x into nzmax doubles: more would overflow; fewer than the entries
+  // in use would leave values uninitialised.
+  const long used = nz >= 0 ? nz : nzmax;
+  const long nn = static_cast<long>(n) * n;
+  if (x.points > nzmax || x.points < used || (nz >= 0 && nzmax > std::max<long>(nz, nn))) {
+    msg << "W/x has " << x.points << " entries but nzmax = " << nzmax << " and " << used
+        << " entries are in use";
+    Fail(path, msg.str());
+  }
+  if (used == 0) Fail(path, "W stores no entries");
+  layout.x_points = x.points;
+  // Optional matrix info, read by libfclib when "conditioning" is present.
+  if (Exists(file, "/fclib_local/W/conditioning")) {
+    RequireNumbers(file, path, "/fclib_local/W/conditioning", 1);
+    RequireNumbers(file, path, "/fclib_local/W/determinant", 1);
+    if (RequireIntegers(file, path, "/fclib_local/W/rank").points != 1) {
+      Fail(path, "/fclib_local/W/rank must hold exactly one integer");
+    }
+    RequireOptionalString(file, path, "/fclib_local/W/comment");
+  }
+  RequireGroup(file, path, "/fclib_local/vectors");
+  RequireNumbers(file, path, "/fclib_local/vectors/q", m);
+  RequireNumbers(file, path, "/fclib_local/vectors/mu", m / 3);
+  if (Exists(file, "/fclib_local/info")) {
+    RequireGroup(file, path, "/fclib_local/info");
+    layout.title_size = RequireOptionalString(file, path, "/fclib_local/info/title");
+    layout.description_size =
+        RequireOptionalString(file, path, "/fclib_local/info/description");
+    layout.math_info_size = RequireOptionalString(file, path, "/fclib_local/info/math_info");
+  }
+  return layout;
+}
+
+void CheckIsHdf5File(const std::string& path) {
+  std::error_code error;
+  if (!std::filesystem::exists(path, error)) Fail(path, "does not exist");
+  if (!std::filesystem::is_regular_file(path, error)) Fail(path, "is not a regular file");
+  if (H5Fis_hdf5(path.c_str()) <= 0) Fail(path, "is not an HDF5 file");
+}
+
+// Opens, checks the local-problem layout, closes (libfclib reopens the file by name).
+LocalLayout CheckFile(const std::string& path, bool* has_solution = nullptr,
+                      bool* has_global = nullptr) {
+  SilenceHdf5();
+  CheckIsHdf5File(path);
+  H5Id file(H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT), H5Fclose);
+  if (!file.valid()) Fail(path, "cannot be opened by HDF5 (corrupt or locked?)");
+  const LocalLayout layout = CheckLocalLayout(file.get(), path);
+  if (has_solution != nullptr) *has_solution = Exists(file.get(), "/solution");
+  if (has_global != nullptr) *has_global = Exists(file.get(), "/fclib_global");
+  return layout;
+}
+
+std::string CopyString(const char* text, std::size_t size) {
+  if (text == nullptr) return {};
+  return std::string(text, strnlen(text, size));  // fixed-length strings may lack the NUL
+}
+
+[[noreturn]] void RethrowWithPath(const std::string& path, const InputError& error) {
+  throw InputError("FCLIB file '" + path + "': " + error.what());
+}
+
+Eigen::VectorXd CopyChecked(const double* values, int size, const std::string& path,
+                            const std::string& name) {
+  Eigen::VectorXd out(size);
+  for (int k = 0; k < size; ++k) {
+    if (!std::isfinite(values[k])) {
+      Fail(path, name + "[" + std::to_string(k) + "] is " + std::to_string(values[k]) +
+                     "; every value must be finite");
+    }
+    out(k) = values[k];
+  }
+  return out;
+}
+
+// W as compressed columns of its non-zero entries, with fclib_local/fclib_matrix views on
+// the owned arrays (libfclib's write and merit functions take non-const pointers).
+class LocalView {
+ public:
+  explicit LocalView(const contact::ContactProblem& problem, const FclibInfo* info = nullptr)
+      : q_(problem.free_displacement_m.data(),
+           problem.free_displacement_m.data() + problem.free_displacement_m.size()),
+        mu_(problem.friction_coefficient.data(),
+            problem.friction_coefficient.data() + problem.friction_coefficient.size()) {
+    const auto& w = problem.flexibility_m_per_n;
+    const int n = static_cast<int>(w.cols());
+    p_.push_back(0);
+    for (int j = 0; j < n; ++j) {
+      for (int i = 0; i < n; ++i) {
+        if (w(i, j) != 0.0) {
+          i_.push_back(i);
+          x_.push_back(w(i, j));
+        }
+      }
+      p_.push_back(static_cast<int>(i_.size()));
+    }
+    matrix_ = fclib_matrix{};
+    matrix_.nzmax = static_cast<int>(x_.size());
+    matrix_.m = n;
+    matrix_.n = n;
+    matrix_.p = p_.data();
+    matrix_.i = i_.data();
+    matrix_.x = x_.data();
+    matrix_.nz = -1;
+    matrix_.info = nullptr;
+    local_ = fclib_local{};
+    local_.W = &matrix_;
+    local_.V = nullptr;
+    local_.R = nullptr;
+    local_.mu = mu_.data();
+    local_.q = q_.data();
+    local_.s = nullptr;
+    local_.spacedim = 3;
+    local_.info = nullptr;
+    if (info != nullptr &&
+        !(info->title.empty() && info->description.empty() && info->math_info.empty())) {
+      title_ = info->title;
+      description_ = info->description;
+      math_info_ = info->math_info;
+      info_.title = title_.empty() ? nullptr : title_.data();
+      info_.description = description_.empty() ? nullptr : description_.data();
+      info_.math_info = math_info_.empty() ? nullptr : math_info_.data();
+      local_.info = &info_;
+    }
+  }
+  LocalView(const LocalView&) = delete;
+  LocalView& operator=(const LocalView&) = delete;
+  fclib_local* get() { return &local_; }
+
+ private:
+  std::vector<double> q_, mu_, x_;
+  std::vector<int> p_, i_;
+  std::string title_, description_, math_info_;
+  fclib_matrix matrix_{};
+  fclib_info info_{};
+  fclib_local local_{};
+};
+
+void ValidateForWrite(const std::string& path, const contact::ContactProblem& problem) {
+  try {
+    contact::ValidateProblem(problem);
+  } catch (const InputError& error) {
+    Fail(path, std::string("cannot write: ") + error.what());
+  }
+  if (problem.num_contacts() == 0) Fail(path, "cannot write a problem with no contacts");
+  if (problem.num_contacts() > kMaxContacts) {
+    Fail(path, "cannot write more than " + std::to_string(kMaxContacts) + " contacts");
+  }
+}
+
+}  // namespace
+
+const char* StorageName(MatrixStorage storage) {
+  switch (storage) {
+    case MatrixStorage::kCompressedColumns:
+      return "compressed columns";
+    case MatrixStorage::kCompressedRows:
+      return "compressed rows";
+    case MatrixStorage::kTriplet:
+      return "triplet";
+  }
+  return "?";
+}
+
+namespace detail {
+
+Eigen::MatrixXd ToDense(const fclib_matrix& matrix, TripletRows triplet_rows,
+                        long available_values, const std::string& where) {
+  const int rows = matrix.m, cols = matrix.n;
+  if (rows < 0 || cols < 0) throw InputError(where + ": negative size");
+  Eigen::MatrixXd dense = Eigen::MatrixXd::Zero(rows, cols);
+  auto add = [&](long k, long r, long c) {
+    std::ostringstream msg;
+    if (r < 0 || r >= rows || c < 0 || c >= cols) {
+      msg << where << ": entry " << k << " has (row, column) = (" << r << ", " << c
+          << ") outside the " << rows << "x" << cols << " matrix";
+      throw InputError(msg.str());
+    }
+    if (!std::isfinite(matrix.x[k])) {
+      msg << where << ": entry " << k << " at (" << r << ", " << c << ") is " << matrix.x[k]
+          << "; every value must be finite";
+      throw InputError(msg.str());
+    }
+    dense(r, c) += matrix.x[k];
+  };
+  if (matrix.nz >= 0) {  // triplet
+    if (matrix.nz > available_values) {
+      throw InputError(where + ": triplet nz exceeds the stored values");
+    }
+    const int* row_index = triplet_rows == TripletRows::kInI ? matrix.i : matrix.p;
+    const int* col_index = triplet_rows == TripletRows::kInI ? matrix.p : matrix.i;
+    for (long k = 0; k < matrix.nz; ++k) add(k, row_index[k], col_index[k]);
+    return dense;
+  }
+  if (matrix.nz != -1 && matrix.nz != -2) {
+    throw InputError(where + ": unknown storage nz = " + std::to_string(matrix.nz));
+  }
+  const bool by_columns = matrix.nz == -1;
+  const int outer = by_columns ? cols : rows;
+  if (matrix.p[0] != 0) throw InputError(where + ": compressed pointers must start at 0");
+  for (int j = 0; j < outer; ++j) {
+    if (matrix.p[j + 1] < matrix.p[j]) {
+      throw InputError(where + ": compressed pointers decrease at " + std::to_string(j + 1));
+    }
+  }
+  if (matrix.p[outer] > available_values) {
+    std::ostringstream msg;
+    msg << where << ": compressed pointers address " << matrix.p[outer] << " entries but only "
+        << available_values << " are stored";
+    throw InputError(msg.str());
+  }
+  for (int j = 0; j < outer; ++j) {
+    for (long k = matrix.p[j]; k < matrix.p[j + 1]; ++k) {
+      if (by_columns) {
+        add(k, matrix.i[k], j);
+      } else {
+        add(k, j, matrix.i[k]);
+      }
+    }
+  }
+  return dense;
+}
+
+}  // namespace detail
+
+contact::ContactProblem ReadFclibLocalProblem(const std::string& path,
+                                              FclibFileDetails* details) {
+  const LocalLayout layout = CheckFile(path);
+  LocalPtr local(fclib_read_local(path.c_str()));
+  if (!local) Fail(path, "libfclib could not read the local problem");
+  HAPCO_ASSERT(local->W != nullptr && local->W->m == layout.m && local->W->n == layout.n &&
+                   local->W->nz == layout.nz && local->spacedim == 3,
+               "libfclib read a different layout than the one checked");
+  const fclib_matrix& w = *local->W;
+  const int n = layout.n;
+
+  contact::ContactProblem problem;
+  // Triplets: rows from `i` (CSparse, as Siconos writes). The documented convention gives
+  // the transpose, identical for the symmetric W checked below.
+  try {
+    problem.flexibility_m_per_n =
+        detail::ToDense(w, detail::TripletRows::kInI, layout.x_points, "W");
+  } catch (const InputError& error) {
+    RethrowWithPath(path, error);
+  }
+  problem.free_displacement_m = CopyChecked(local->q, n, path, "/fclib_local/vectors/q");
+  problem.friction_coefficient = CopyChecked(local->mu, n / 3, path, "/fclib_local/vectors/mu");
+
+  // Asymmetry gets its own message: it is the symptom a triplet-convention mix-up would be
+  // suspected of, and it is not one (see fclib_io.h).
+  const Eigen::MatrixXd& dense = problem.flexibility_m_per_n;
+  const double scale = dense.cwiseAbs().maxCoeff();
+  for (int j = 0; j < n; ++j) {
+    for (int i = j + 1; i < n; ++i) {
+      if (std::abs(dense(i, j) - dense(j, i)) > 1e-8 * scale) {
+        std::ostringstream msg;
+        msg << "W is not symmetric: W(" << i << "," << j << ") = " << dense(i, j) << " but W("
+            << j << "," << i << ") = " << dense(j, i) << " (stored as "
+            << StorageName(w.nz >= 0   ? MatrixStorage::kTriplet
+                           : w.nz == -1 ? MatrixStorage::kCompressedColumns
+                                        : MatrixStorage::kCompressedRows)
+            << "). FCLIB stores the full symmetric W; a file holding one triangle only is not "
+               "supported";
+        if (w.nz >= 0) {
+          msg << " (reading the triplet's p/i the other way round only transposes W, so the "
+                 "index convention is not the cause)";
+        }
+        Fail(path, msg.str());
+      }
+    }
+  }
+  try {
+    contact::ValidateProblem(problem);
+  } catch (const InputError& error) {
+    RethrowWithPath(path, error);
+  }
+  if (details != nullptr) {
+    details->w_storage = w.nz >= 0    ? MatrixStorage::kTriplet
+                         : w.nz == -1 ? MatrixStorage::kCompressedColumns
+                                      : MatrixStorage::kCompressedRows;
+    details->w_stored_entries = w.nz >= 0 ? w.nz : w.p[w.nz == -1 ? w.n : w.m];
+    details->info = FclibInfo{};
+    if (local->info != nullptr) {
+      details->info.title = CopyString(local->info->title, layout.title_size);
+      details->info.description =
+          CopyString(local->info->description, layout.description_size);
+      details->info.math_info = CopyString(local->info->math_info, layout.math_info_size);
+    }
+  }
+  return problem;
+}
+
+void WriteFclibLocalProblem(const std::string& path, const contact::ContactProblem& problem,
+                            const FclibInfo& info) {
+  SilenceHdf5();
+  ValidateForWrite(path, problem);
+  // Create (or truncate) the file ourselves: fclib_write_local appends to an existing file
+  // and refuses one that already holds a local problem.
+  {
+    H5Id file(H5Fcreate(path.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT), H5Fclose);
+    if (!file.valid()) {
+      Fail(path, "cannot be created (does the directory exist and is it writable?)");
+    }
+  }
+  LocalView view(problem, &info);
+  if (fclib_write_local(view.get(), path.c_str()) != 1) {
+    Fail(path, "libfclib failed to write the local problem");
+  }
+}
+
+void WriteFclibSolution(const std::string& path, const Eigen::VectorXd& force_n,
+                        const Eigen::VectorXd& displacement_m) {
+  bool has_solution = false, has_global = false;
+  const LocalLayout layout = CheckFile(path, &has_solution, &has_global);
+  if (has_global) {
+    Fail(path, "also holds a global problem; libfclib would size the solution from it");
+  }
+  if (force_n.size() != layout.n || displacement_m.size() != layout.n) {
+    std::ostringstream msg;
+    msg << "cannot write a solution with r of size " << force_n.size() << " and u of size "
+        << displacement_m.size() << " for a problem with 3m = " << layout.n;
+    Fail(path, msg.str());
+  }
+  if (!force_n.allFinite() || !displacement_m.allFinite()) {
+    Fail(path, "cannot write a solution with non-finite values");
+  }
+  if (has_solution) {
+    H5Id file(H5Fopen(path.c_str(), H5F_ACC_RDWR, H5P_DEFAULT), H5Fclose);
+    if (!file.valid() || H5Ldelete(file.get(), "/solution", H5P_DEFAULT) < 0) {
+      Fail(path, "cannot replace the existing /solution (is the file writable?)");
+    }
+  }
+  std::vector<double> r(force_n.data(), force_n.data() + force_n.size());
+  std::vector<double> u(displacement_m.data(), displacement_m.data() + displacement_m.size());
+  fclib_solution solution{};
+  solution.v = nullptr;
+  solution.u = u.data();
+  solution.r = r.data();
+  solution.l = nullptr;
+  if (fclib_write_solution(&solution, path.c_str()) != 1) {
+    Fail(path, "libfclib failed to write the solution (is the file writable?)");
+  }
+}
+
+std::optional<FclibSolution> ReadFclibSolution(const std::string& path) {
+  bool has_solution = false, has_global = false;
+  const LocalLayout layout = CheckFile(path, &has_solution, &has_global);
+  if (!has_solution) return std::nullopt;
+  if (has_global) {
+    Fail(path, "also holds a global problem; its solution would be sized from it");
+  }
+  {
+    SilenceHdf5();
+    H5Id file(H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT), H5Fclose);
+    RequireGroup(file.get(), path, "/solution");
+    RequireNumbers(file.get(), path, "/solution/r", layout.n);
+    RequireNumbers(file.get(), path, "/solution/u", layout.n);
+  }
+  SolutionPtr solution(fclib_read_solution(path.c_str()));
+  if (!solution) Fail(path, "libfclib could not read the solution");
+  FclibSolution out;
+  out.force_n = CopyChecked(solution->r, layout.n, path, "/solution/r");
+  out.displacement_m = CopyChecked(solution->u, layout.n, path, "/solution/u");
+  return out;
+}
+
+double FclibMeritLocal(const contact::ContactProblem& problem, const Eigen::VectorXd& force_n) {
+  contact::ValidateProblem(problem);
+  if (force_n.size() != problem.free_displacement_m.size()) {
+    throw InputError("FclibMeritLocal: r has size " + std::to_string(force_n.size()) +
+                     ", the problem needs 3m = " +
+                     std::to_string(problem.free_displacement_m.size()));
+  }
+  LocalView view(problem);
+  std::vector<double> r(force_n.data(), force_n.data() + force_n.size());
+  const Eigen::VectorXd u_eigen = problem.flexibility_m_per_n * force_n +
+                                  problem.free_displacement_m;
+  std::vector<double> u(u_eigen.data(), u_eigen.data() + u_eigen.size());
+  fclib_solution solution{};
+  solution.v = nullptr;
+  solution.u = u.data();
+  solution.r = r.data();
+  solution.l = nullptr;
+  return fclib_merit_local(view.get(), MERIT_1, &solution);
+}
+
+}  // namespace hapco::fclib
