@@ -18,11 +18,11 @@ std::string_view ContactStateName(ContactState state) {
 Eigen::Vector3d ProjectOnCoulombCone(const Eigen::Vector3d& r, double mu) {
   const double rn = r(0);
   const double a = std::hypot(r(1), r(2));  // ‖r_t‖
-  if (a <= mu * rn) return r;                            // inside K_μ (sticking)
+  // Inside K_μ (sticking). r_n >= 0 matters for μ = 0, where a = 0 <= μ r_n = −0.
+  if (rn >= 0.0 && a <= mu * rn) return r;
   if (mu * a <= -rn) return Eigen::Vector3d::Zero();     // in the polar cone (separating)
   // Boundary (sliding), algorithms.md §3: normal part (r_n + μa)/(1 + μ²), tangential μ times
-  // it along r_t/a. Here a > 0 unless μ = 0 and r_n > 0 ... which the first case took; with
-  // μ = 0 and r_n > 0, a > 0 lands here and the formula gives (r_n, 0, 0).
+  // it along r_t/a. With μ = 0 this is (r_n, 0, 0), r_n > 0.
   const double normal = (rn + mu * a) / (1.0 + mu * mu);
   Eigen::Vector3d p;
   p(0) = normal;

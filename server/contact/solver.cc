@@ -1,9 +1,20 @@
-// Stub: API only; the implementation follows.
+// Solvers of algorithms.md §4 (paper section 3.3). Layout of every sweep:
+// - u = W r + ũ is kept current in the workspace. Gauss-Seidel sweeps update it incrementally
+//   after each contact, u += W_{:,α} Δr_α: three contiguous columns of the column-major W, so
+//   a full sweep costs about one dense W·r product and contacts that do not move cost nothing.
+// - Jacobi recomputes u = W r + ũ once per sweep (one product).
+// u is recomputed exactly at exit, so incremental round-off never reaches the result.
 #include "contact/solver.h"
 
+#include <algorithm>
+#include <cmath>
+#include <limits>
 #include <string>
 
 #include "common/error.h"
+#include "common/timer.h"
+#include "contact/local_solver.h"
+#include "contact/projection.h"
 
 namespace hapco::contact {
 
@@ -39,24 +50,293 @@ std::string_view StatusName(SolverStatus status) {
 void SolverResult::Reserve(int num_contacts, int max_iterations) {
   force_n = Eigen::VectorXd::Zero(3 * num_contacts);
   displacement_m = Eigen::VectorXd::Zero(3 * num_contacts);
-  stats.residual_history.reserve(static_cast<std::size_t>(max_iterations));
+  stats.residual_history.reserve(static_cast<std::size_t>(std::max(max_iterations, 0)));
 }
 
 void SolverWorkspace::Reserve(int max_contacts, int /*max_iterations*/) {
-  u_.resize(3 * max_contacts);
-  r_previous_.resize(3 * max_contacts);
-  rho_per_contact_.resize(max_contacts);
+  // The residual history lives in SolverResult (SolverResult::Reserve); max_iterations is
+  // accepted here so that callers size everything from the same two numbers.
+  if (max_contacts > reserved_contacts()) {
+    u_.resize(3 * max_contacts);
+    r_previous_.resize(3 * max_contacts);
+    rho_per_contact_.resize(max_contacts);
+  }
 }
 
-SolverStatus Solve(SolverKind, const ContactProblem& problem, const SolverParameters&,
-                   SolverWorkspace*, SolverResult* result) {
-  const Eigen::Index n = 3 * problem.num_contacts();
-  result->force_n = Eigen::VectorXd::Zero(n);
-  result->displacement_m = problem.free_displacement_m;
-  result->stats = SolverStats{};
-  return result->stats.status;
+struct SolverInternals {
+  static Eigen::VectorXd& U(SolverWorkspace* w) { return w->u_; }
+  static Eigen::VectorXd& RPrevious(SolverWorkspace* w) { return w->r_previous_; }
+  static Eigen::VectorXd& Rho(SolverWorkspace* w) { return w->rho_per_contact_; }
+};
+
+namespace {
+
+void CheckParameters(const SolverParameters& p) {
+  auto fail = [](const std::string& what) { throw InputError("solver parameters: " + what); };
+  if (!(p.global_tolerance_m > 0.0)) fail("global_tolerance_m must be > 0 (metres)");
+  if (!(p.local_tolerance_m > 0.0)) fail("local_tolerance_m must be > 0 (metres)");
+  if (!(p.fc3d_tolerance >= 0.0)) fail("fc3d_tolerance must be >= 0 (0 = off)");
+  if (p.max_iterations < 1) fail("max_iterations must be >= 1");
+  if (p.max_inner_iterations < 1) fail("max_inner_iterations must be >= 1");
+  if (!(p.time_budget_s >= 0.0) || !std::isfinite(p.time_budget_s)) {
+    fail("time_budget_s must be finite and >= 0 (0 = no budget)");
+  }
+  if (!(p.rho_scale > 0.0) || !std::isfinite(p.rho_scale)) fail("rho_scale must be finite and > 0");
+  if (!(p.divergence_factor > 1.0)) fail("divergence_factor must be > 1");
 }
 
-double Fc3dError(const ContactProblem&, const Eigen::VectorXd&) { return 0.0; }
+// Fc3d error (algorithms.md §4) from r, u = W r + ũ and ũ, without allocating.
+double Fc3dFromState(const Eigen::VectorXd& mu, const Eigen::Ref<const Eigen::VectorXd>& r,
+                     const Eigen::Ref<const Eigen::VectorXd>& u,
+                     const Eigen::VectorXd& u_free) {
+  double numerator2 = 0.0;
+  for (Eigen::Index a = 0; a < mu.size(); ++a) {
+    const Eigen::Vector3d ra = r.segment<3>(3 * a);
+    const Eigen::Vector3d ua = u.segment<3>(3 * a);
+    numerator2 += (ra - UzawaPredictorCorrector(ra, ua, mu(a), 1.0)).squaredNorm();
+  }
+  const double numerator = std::sqrt(numerator2);
+  const double denominator = std::max({u_free.norm(), r.norm(), u.norm()});
+  return denominator > 0.0 ? numerator / denominator : numerator;
+}
+
+// ρ_α for every contact (algorithms.md §4 "ρ"); returns the smallest.
+double ComputeRho(const ContactProblem& problem, const SolverParameters& p,
+                  Eigen::Ref<Eigen::VectorXd> rho) {
+  const auto& w = problem.flexibility_m_per_n;
+  const Eigen::Index m = problem.num_contacts();
+  const Eigen::Index n = 3 * m;
+  for (Eigen::Index i = 0; i < n; ++i) {
+    if (!(w(i, i) > 0.0)) {
+      throw InputError("contact problem: flexibility diagonal W(" + std::to_string(i) + "," +
+                       std::to_string(i) + ") = " + std::to_string(w(i, i)) +
+                       " m/N must be > 0 (run ValidateProblem for a full check)");
+    }
+  }
+  if (p.rho_rule == RhoRule::kPaperGlobalMin) {
+    // Paper 3.3.3: ρ = min_i 1/W_ii, i = 1..3m.
+    const double rho_min = p.rho_scale / w.diagonal().maxCoeff();
+    rho.setConstant(rho_min);
+    return rho_min;
+  }
+  double rho_min = std::numeric_limits<double>::infinity();
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig;
+  for (Eigen::Index a = 0; a < m; ++a) {
+    const Eigen::Matrix3d block = w.block<3, 3>(3 * a, 3 * a);
+    eig.computeDirect(block, Eigen::EigenvaluesOnly);
+    const double lambda_max = eig.eigenvalues()(2);  // ascending order
+    HAPCO_ASSERT(lambda_max > 0.0, "positive diagonal implies a positive largest eigenvalue");
+    rho(a) = p.rho_scale / lambda_max;
+    rho_min = std::min(rho_min, rho(a));
+  }
+  return rho_min;
+}
+
+// One Gauss-Seidel sweep (paper 3.3.1 / 3.3.2, or exact local solves). Updates r and u in
+// place; returns Σ ‖Δr_α‖²/ρ_α² and adds the local iteration count to *inner.
+double GaussSeidelSweep(SolverKind kind, const ContactProblem& problem,
+                        const SolverParameters& p, const Eigen::Ref<const Eigen::VectorXd>& rho,
+                        Eigen::VectorXd& r, Eigen::Ref<Eigen::VectorXd> u, int* inner) {
+  const auto& w = problem.flexibility_m_per_n;
+  const Eigen::Index m = problem.num_contacts();
+  double sum = 0.0;
+  for (Eigen::Index a = 0; a < m; ++a) {
+    const Eigen::Index i = 3 * a;
+    const double mu = problem.friction_coefficient(a);
+    const double rho_a = rho(a);
+    const Eigen::Matrix3d waa = w.block<3, 3>(i, i);
+    const Eigen::Vector3d r_old = r.segment<3>(i);
+    // q = ᵅᵝu + ũ_α: coupling with the newest values of the others plus the free part.
+    const Eigen::Vector3d q = u.segment<3>(i) - waa * r_old;
+    Eigen::Vector3d r_new = r_old;
+    switch (kind) {
+      case SolverKind::kGlobalUzawaGaussSeidel:
+        // Paper 3.3.2: one predictor-corrector with the current u_α.
+        r_new = UzawaPredictorCorrector(r_old, u.segment<3>(i), mu, rho_a);
+        *inner += 1;
+        break;
+      case SolverKind::kLocalUzawa: {
+        // Paper 3.3.1 inner loop: predictor, corrector, back-up u = W_αα r + ᵅᵝu + ũ_α,
+        // until ‖Δr_α‖/ρ < ε₂. Started from the current r_α rather than the paper's 0, so
+        // that a warm start carries through the inner loop too.
+        Eigen::Vector3d rj = r_old;
+        for (int j = 0; j < p.max_inner_iterations; ++j) {
+          const Eigen::Vector3d uj = waa * rj + q;
+          const Eigen::Vector3d next = UzawaPredictorCorrector(rj, uj, mu, rho_a);
+          *inner += 1;
+          const double step_m = (next - rj).norm() / rho_a;
+          rj = next;
+          if (!(step_m >= p.local_tolerance_m)) break;  // also stops on NaN
+        }
+        r_new = rj;
+        break;
+      }
+      case SolverKind::kReferenceNsgs:
+        r_new = SolveSingleContactExact(waa, q, mu);
+        *inner += 1;
+        break;
+      case SolverKind::kGlobalUzawaJacobi:
+        HAPCO_ASSERT(false, "Jacobi order has no Gauss-Seidel sweep");
+        r_new = r_old;
+        break;
+    }
+    const Eigen::Vector3d d = r_new - r_old;
+    if (d(0) != 0.0 || d(1) != 0.0 || d(2) != 0.0) {
+      r.segment<3>(i) = r_new;
+      // u += W_{:,α} Δr_α over three contiguous columns (W symmetric, column-major).
+      u.noalias() += w.col(i) * d(0) + w.col(i + 1) * d(1) + w.col(i + 2) * d(2);
+      sum += d.squaredNorm() / (rho_a * rho_a);
+    }
+  }
+  return sum;
+}
+
+// One Jacobi sweep (De Saxcé fixed point): every contact from the same u(k) = W r(k) + ũ.
+double JacobiSweep(const ContactProblem& problem, const Eigen::Ref<const Eigen::VectorXd>& rho,
+                   Eigen::VectorXd& r, const Eigen::Ref<const Eigen::VectorXd>& u, int* inner) {
+  const Eigen::Index m = problem.num_contacts();
+  double sum = 0.0;
+  for (Eigen::Index a = 0; a < m; ++a) {
+    const Eigen::Index i = 3 * a;
+    const Eigen::Vector3d r_old = r.segment<3>(i);
+    const Eigen::Vector3d r_new = UzawaPredictorCorrector(
+        r_old, u.segment<3>(i), problem.friction_coefficient(a), rho(a));
+    r.segment<3>(i) = r_new;
+    sum += (r_new - r_old).squaredNorm() / (rho(a) * rho(a));
+  }
+  *inner += static_cast<int>(m);
+  return sum;
+}
+
+}  // namespace
+
+SolverStatus Solve(SolverKind kind, const ContactProblem& problem,
+                   const SolverParameters& parameters, SolverWorkspace* workspace,
+                   SolverResult* result) {
+  Stopwatch clock;
+  HAPCO_ASSERT(workspace != nullptr && result != nullptr, "Solve needs a workspace and a result");
+  CheckParameters(parameters);
+  const int m = problem.num_contacts();
+  const Eigen::Index n = 3 * static_cast<Eigen::Index>(m);
+  const auto& w = problem.flexibility_m_per_n;
+  const auto& u_free = problem.free_displacement_m;
+  if (w.rows() != n || w.cols() != n || u_free.size() != n) {
+    throw InputError("contact problem: W is " + std::to_string(w.rows()) + "x" +
+                     std::to_string(w.cols()) + " and ũ has size " +
+                     std::to_string(u_free.size()) + ", but " + std::to_string(m) +
+                     " friction coefficients need 3m = " + std::to_string(n));
+  }
+  workspace->Reserve(m, parameters.max_iterations);  // no-op once reserved
+  auto u = SolverInternals::U(workspace).head(n);
+  auto r_previous = SolverInternals::RPrevious(workspace).head(n);
+  auto rho = SolverInternals::Rho(workspace).head(m);
+
+  SolverStats& stats = result->stats;
+  stats.status = SolverStatus::kMaxIterations;
+  stats.iterations = 0;
+  stats.inner_iterations = 0;
+  stats.paper_error_m = 0.0;
+  stats.fc3d_error = 0.0;
+  stats.residual_history.clear();  // keeps its capacity
+  stats.state_counts = {0, 0, 0};
+
+  Eigen::VectorXd& r = result->force_n;
+  if (parameters.warm_start) {
+    if (r.size() != n) {
+      throw InputError("warm_start: result->force_n has size " + std::to_string(r.size()) +
+                       " but the problem has 3m = " + std::to_string(n) + " force components");
+    }
+    if (!r.allFinite()) throw InputError("warm_start: result->force_n is not finite");
+  } else if (r.size() != n) {
+    r = Eigen::VectorXd::Zero(n);  // allocates only when m changed since the last call
+  } else {
+    r.setZero();
+  }
+
+  // ρ_α per contact (also checks W_ii > 0).
+  stats.rho = m > 0 ? ComputeRho(problem, parameters, rho) : 0.0;
+
+  // u(0) = W r(0) + ũ.
+  if (parameters.warm_start) {
+    u.noalias() = w * r;
+    u += u_free;
+  } else {
+    u = u_free;
+  }
+
+  double min_error = std::numeric_limits<double>::infinity();
+  const double eps1 = parameters.global_tolerance_m;
+  int iteration = 0;
+  while (m > 0) {
+    r_previous = r;
+    double sum;
+    if (kind == SolverKind::kGlobalUzawaJacobi) {
+      sum = JacobiSweep(problem, rho, r, u, &stats.inner_iterations);
+      u.noalias() = w * r;
+      u += u_free;
+    } else {
+      sum = GaussSeidelSweep(kind, problem, parameters, rho, r, u, &stats.inner_iterations);
+    }
+    ++iteration;
+    const double error = std::sqrt(sum);
+    if (!std::isfinite(error) || !r.allFinite()) {
+      // Divergence: go back to the last finite iterate (never return a NaN force).
+      r = r_previous;
+      stats.status = SolverStatus::kDiverged;
+      break;
+    }
+    stats.paper_error_m = error;
+    stats.residual_history.push_back(error);
+    min_error = std::min(min_error, error);
+    bool converged = error < eps1;
+    if (!converged && parameters.fc3d_tolerance > 0.0) {
+      converged = Fc3dFromState(problem.friction_coefficient, r, u, u_free) <
+                  parameters.fc3d_tolerance;
+    }
+    if (converged) {
+      stats.status = SolverStatus::kConverged;
+      break;
+    }
+    if (error > parameters.divergence_factor * std::max(min_error, eps1)) {
+      stats.status = SolverStatus::kDiverged;
+      break;
+    }
+    if (parameters.time_budget_s > 0.0 && clock.ElapsedSeconds() > parameters.time_budget_s) {
+      stats.status = SolverStatus::kTimeBudgetExceeded;
+      break;
+    }
+    if (iteration >= parameters.max_iterations) {
+      stats.status = SolverStatus::kMaxIterations;
+      break;
+    }
+  }
+  if (m == 0) stats.status = SolverStatus::kConverged;
+  stats.iterations = iteration;
+
+  // Exact u for the returned r (removes incremental round-off), then the exit measures.
+  Eigen::VectorXd& u_out = result->displacement_m;
+  if (u_out.size() != n) u_out.resize(n);  // allocates only when m changed
+  u_out.noalias() = w * r;
+  u_out += u_free;
+  stats.fc3d_error = m > 0 ? Fc3dFromState(problem.friction_coefficient, r, u_out, u_free) : 0.0;
+  for (int a = 0; a < m; ++a) {
+    const ContactState s = ClassifyContact(r.segment<3>(3 * a), u_out.segment<3>(3 * a),
+                                           rho(a) * eps1, eps1);
+    ++stats.state_counts[static_cast<std::size_t>(s)];
+  }
+  stats.seconds = clock.ElapsedSeconds();
+  return stats.status;
+}
+
+double Fc3dError(const ContactProblem& problem, const Eigen::VectorXd& force_n) {
+  const Eigen::Index n = 3 * static_cast<Eigen::Index>(problem.num_contacts());
+  if (force_n.size() != n || problem.flexibility_m_per_n.rows() != n ||
+      problem.flexibility_m_per_n.cols() != n || problem.free_displacement_m.size() != n) {
+    throw InputError("Fc3dError: force, W and ũ must all be sized for 3m = " +
+                     std::to_string(n) + " components");
+  }
+  const Eigen::VectorXd u = problem.flexibility_m_per_n * force_n + problem.free_displacement_m;
+  return Fc3dFromState(problem.friction_coefficient, force_n, u, problem.free_displacement_m);
+}
 
 }  // namespace hapco::contact

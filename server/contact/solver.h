@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "contact/problem.h"
+#include "contact/projection.h"
 
 namespace hapco::contact {
 
