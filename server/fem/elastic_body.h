@@ -1,0 +1,98 @@
+#pragma once
+// A linear elastic body with Dirichlet nodes, factored once (algorithms.md sections 1 and 6).
+#include <memory>
+#include <span>
+#include <vector>
+
+#include <Eigen/Core>
+#include <Eigen/SparseCore>
+
+#include "fem/mesh.h"
+
+namespace hapco::fem {
+
+struct ElasticBodyStats {
+  double assembly_seconds = 0.0;       // validation + stiffness assembly, s
+  double factorization_seconds = 0.0;  // CHOLMOD analyse + numeric factorization of K_ff, s
+  long stiffness_nonzeros = 0;         // stored entries of the full 3N x 3N K
+  long factor_nonzeros = 0;            // nonzeros of the Cholesky factor L (CHOLMOD lnz)
+  int free_dofs = 0;                   // size of K_ff
+};
+
+// Immutable after construction (design.md, example 4): every query reuses the one factor, so a
+// haptic step never re-assembles or re-factors. Thread-compatible: const methods may run
+// concurrently only if CHOLMOD's workspace is not shared - call them from one thread.
+class ElasticBody {
+ public:
+  struct Spec {
+    Mesh mesh;
+    Material material;
+    std::vector<int> clamped_nodes;  // displacement fixed to zero
+    std::vector<int> driven_nodes;   // translated rigidly with the device (Dirichlet data)
+  };
+
+  // Validates the spec (InputError), assembles K, removes all dofs of clamped and driven nodes,
+  // factors K_ff once with CHOLMOD (supernodal LL^T) and computes the unit driven fields.
+  // Throws InputError if there is no Dirichlet node, the Dirichlet nodes are collinear (a
+  // rigid rotation is left free), a node id is out of range, a node is both clamped and
+  // driven, or the CHOLMOD factorization finds K_ff not positive definite.
+  explicit ElasticBody(Spec spec);
+  ~ElasticBody();
+  ElasticBody(ElasticBody&&) noexcept;
+  ElasticBody& operator=(ElasticBody&&) noexcept;
+  ElasticBody(const ElasticBody&) = delete;
+  ElasticBody& operator=(const ElasticBody&) = delete;
+
+  const Mesh& mesh() const { return spec_.mesh; }
+  const Material& material() const { return spec_.material; }
+  const std::vector<int>& clamped_nodes() const { return spec_.clamped_nodes; }
+  const std::vector<int>& driven_nodes() const { return spec_.driven_nodes; }
+  int num_dofs() const { return 3 * spec_.mesh.num_nodes(); }
+  int num_free_dofs() const { return static_cast<int>(free_to_dof_.size()); }
+  // Full assembled stiffness (3N x 3N, N/m, both triangles).
+  const Eigen::SparseMatrix<double>& stiffness() const { return stiffness_; }
+  bool is_dirichlet_node(int node) const { return dof_to_free_[3 * static_cast<std::size_t>(node)] < 0; }
+
+  // Static solve with the stored factor: full displacement field (3N, m) under nodal loads
+  // (3N, N; entries at Dirichlet dofs are ignored), clamped nodes fixed, driven nodes translated
+  // rigidly by driven_translation_m. Solves K_ff u_f = f_f - K_fd u_d.
+  Eigen::VectorXd SolveDisplacement(const Eigen::VectorXd& nodal_force_n,
+                                    const Eigen::Vector3d& driven_translation_m) const;
+
+  // algorithms.md section 6: displacement field (3N x 3, m per m of device travel) for a unit
+  // rigid translation of the driven nodes along x, y, z with no load; column a is the field for
+  // axis a, so U_free(d) = fields * d. Zero if there are no driven nodes.
+  const Eigen::MatrixXd& unit_driven_translation_fields() const { return unit_fields_; }
+
+  // Compliance block of a node set S (3|S| x 3|S|, m/N): C(3i+a, 3j+b) = displacement of node
+  // S[i] along axis a for a unit force at node S[j] along axis b, all Dirichlet dofs held at
+  // zero. Rows/columns of Dirichlet nodes are zero. Solves for several right-hand sides at a
+  // time, in chunks sized so the dense work arrays stay below ~64 MB.
+  Eigen::MatrixXd ComplianceBlock(std::span<const int> nodes) const;
+
+  // Sum over `nodes` of (K U - f): the force (N) the supports exert on those nodes. For free
+  // nodes of an equilibrium solution this is zero to round-off.
+  Eigen::Vector3d ReactionForce(const Eigen::VectorXd& displacement_m,
+                                const Eigen::VectorXd& nodal_force_n,
+                                std::span<const int> nodes) const;
+
+  const ElasticBodyStats& stats() const { return stats_; }
+
+ private:
+  struct Factor;  // CHOLMOD solver, hidden so users need not include CHOLMOD headers
+
+  void CheckNodes(std::span<const int> nodes, const char* what) const;
+  void CheckRigidMotionsStopped() const;
+  // Solves K_ff X = B for free-dof right-hand sides (columns).
+  Eigen::MatrixXd SolveFree(const Eigen::MatrixXd& rhs_free) const;
+
+  Spec spec_;
+  Eigen::SparseMatrix<double> stiffness_;
+  std::vector<int> dof_to_free_;   // 3N entries: free index, or -1 for a Dirichlet dof
+  std::vector<int> free_to_dof_;
+  std::unique_ptr<Factor> factor_;
+  Eigen::MatrixXd unit_fields_;
+  ElasticBodyStats stats_;
+};
+
+}  // namespace hapco::fem

@@ -1,0 +1,203 @@
+// ElasticBody: consistency of its queries with each other and with an independent solve.
+#include <random>
+#include <set>
+
+#include <Eigen/SparseCholesky>
+#include <gtest/gtest.h>
+
+#include "common/error.h"
+#include "fem/assembly.h"
+#include "fem/box_mesh.h"
+#include "fem/elastic_body.h"
+#include "fem_test_util.h"
+
+namespace hapco::fem {
+namespace {
+
+using testing::Box;
+
+const Material kRed{3e6, 0.3};
+
+// The red body of benchmark 1 at a coarse size, plus a driven patch on its top face (as if a
+// device held those nodes), for the queries that need driven nodes.
+struct Scene {
+  BoxMeshSpec spec;
+  ElasticBody body;
+};
+
+Scene MakeScene(ElementOrder order, bool with_driven) {
+  const BoxMeshSpec spec = Box(0.10, 0.02, 0.02, 6, 2, 2, order);
+  ElasticBody::Spec s;
+  s.mesh = MakeBoxMesh(spec);
+  s.material = kRed;
+  s.clamped_nodes = NodesOnBoxFace(s.mesh, spec, BoxFace::kXMin);
+  if (with_driven) {
+    for (int n : NodesOnBoxFace(s.mesh, spec, BoxFace::kZMax))
+      if (s.mesh.nodes_m(n, 0) > spec.min_corner_m.x() + 0.06) s.driven_nodes.push_back(n);
+  }
+  return {spec, ElasticBody(std::move(s))};
+}
+
+Eigen::VectorXd RandomLoads(int dofs, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> normal(0.0, 0.1);
+  Eigen::VectorXd f(dofs);
+  for (int i = 0; i < dofs; ++i) f[i] = normal(rng);
+  return f;
+}
+
+class ElasticBodyTest : public ::testing::TestWithParam<ElementOrder> {};
+
+TEST_P(ElasticBodyTest, SolveMatchesIndependentSolverAndBoundaryData) {
+  const Scene scene = MakeScene(GetParam(), true);
+  const ElasticBody& body = scene.body;
+  const Eigen::VectorXd f = RandomLoads(body.num_dofs(), 1);
+  const Eigen::Vector3d d(1e-4, -2e-4, -3e-4);
+  const Eigen::VectorXd u = body.SolveDisplacement(f, d);
+  for (int n : body.clamped_nodes()) EXPECT_EQ(u.segment<3>(3 * n).norm(), 0.0);
+  for (int n : body.driven_nodes()) EXPECT_EQ((u.segment<3>(3 * n) - d).norm(), 0.0);
+  // Free rows of K u equal f (equilibrium), checked through K itself.
+  const Eigen::VectorXd residual = body.stiffness() * u - f;
+  std::set<int> dirichlet(body.clamped_nodes().begin(), body.clamped_nodes().end());
+  dirichlet.insert(body.driven_nodes().begin(), body.driven_nodes().end());
+  double worst = 0.0;
+  for (int dof = 0; dof < body.num_dofs(); ++dof)
+    if (!dirichlet.count(dof / 3)) worst = std::max(worst, std::abs(residual[dof]));
+  EXPECT_LT(worst, 1e-9 * f.cwiseAbs().maxCoeff());
+  EXPECT_EQ(body.num_free_dofs(), body.num_dofs() - 3 * static_cast<int>(dirichlet.size()));
+  EXPECT_EQ(body.stats().free_dofs, body.num_free_dofs());
+  EXPECT_GT(body.stats().factor_nonzeros, 0);
+}
+
+TEST_P(ElasticBodyTest, DrivenTranslationIsLinearInTheUnitFields) {
+  const Scene scene = MakeScene(GetParam(), true);
+  const ElasticBody& body = scene.body;
+  const Eigen::Vector3d d(2e-4, -1e-4, -5e-4);
+  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(body.num_dofs());
+  const Eigen::VectorXd direct = body.SolveDisplacement(zero, d);
+  ASSERT_EQ(body.unit_driven_translation_fields().rows(), body.num_dofs());
+  ASSERT_EQ(body.unit_driven_translation_fields().cols(), 3);
+  const Eigen::VectorXd combined = body.unit_driven_translation_fields() * d;
+  EXPECT_LE((direct - combined).norm(), 1e-12 * direct.norm());
+  EXPECT_GT(direct.norm(), 0.0);
+  // No driven nodes: zero fields.
+  const Scene clamped_only = MakeScene(GetParam(), false);
+  EXPECT_EQ(clamped_only.body.unit_driven_translation_fields().norm(), 0.0);
+}
+
+TEST_P(ElasticBodyTest, ComplianceBlockIsSymmetricAndMatchesUnitLoadSolves) {
+  const Scene scene = MakeScene(GetParam(), true);
+  const ElasticBody& body = scene.body;
+  // Nodes on the top face: some free, some driven (their rows/columns must be zero), plus a
+  // clamped one and a repeated one.
+  std::vector<int> nodes = NodesOnBoxFace(body.mesh(), scene.spec, BoxFace::kZMax);
+  nodes.push_back(body.clamped_nodes().front());
+  nodes.push_back(nodes.front());
+  const Eigen::MatrixXd c = body.ComplianceBlock(nodes);
+  ASSERT_EQ(c.rows(), 3 * static_cast<int>(nodes.size()));
+  EXPECT_LE((c - c.transpose()).norm(), 1e-12 * c.norm());
+  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(body.num_dofs());
+  for (std::size_t j = 0; j < nodes.size(); j += 3) {
+    for (int b = 0; b < 3; ++b) {
+      Eigen::VectorXd f = zero;
+      f[3 * nodes[j] + b] = 1.0;
+      const Eigen::VectorXd u = body.SolveDisplacement(f, Eigen::Vector3d::Zero());
+      for (std::size_t i = 0; i < nodes.size(); ++i)
+        for (int a = 0; a < 3; ++a)
+          EXPECT_NEAR(c(3 * i + a, 3 * j + b), u[3 * nodes[i] + a], 1e-12 * c.cwiseAbs().maxCoeff());
+    }
+  }
+  for (std::size_t i = 0; i < nodes.size(); ++i) {
+    if (body.is_dirichlet_node(nodes[i])) {
+      EXPECT_EQ(c.row(3 * i).norm() + c.col(3 * i).norm(), 0.0);
+    } else {
+      EXPECT_GT(c(3 * i + 2, 3 * i + 2), 0.0);  // pushing a free node moves it that way
+    }
+  }
+}
+
+TEST_P(ElasticBodyTest, ReactionsBalanceTheAppliedLoads) {
+  const Scene scene = MakeScene(GetParam(), true);
+  const ElasticBody& body = scene.body;
+  const Eigen::VectorXd f = RandomLoads(body.num_dofs(), 7);
+  const Eigen::VectorXd u = body.SolveDisplacement(f, Eigen::Vector3d(0.0, 0.0, -1e-4));
+  std::vector<int> dirichlet = body.clamped_nodes();
+  dirichlet.insert(dirichlet.end(), body.driven_nodes().begin(), body.driven_nodes().end());
+  // Loads applied to the body (entries at Dirichlet dofs are ignored by the solve).
+  Eigen::Vector3d applied = Eigen::Vector3d::Zero();
+  std::set<int> dset(dirichlet.begin(), dirichlet.end());
+  for (int n = 0; n < body.mesh().num_nodes(); ++n)
+    if (!dset.count(n)) applied += f.segment<3>(3 * n);
+  Eigen::VectorXd f_free = f;
+  for (int n : dirichlet) f_free.segment<3>(3 * n).setZero();
+  const Eigen::Vector3d reactions = body.ReactionForce(u, f_free, dirichlet);
+  EXPECT_LT((reactions + applied).norm(), 1e-10 * applied.norm());
+  // Free nodes carry no reaction.
+  std::vector<int> free_nodes;
+  for (int n = 0; n < body.mesh().num_nodes(); ++n)
+    if (!dset.count(n)) free_nodes.push_back(n);
+  EXPECT_LT(body.ReactionForce(u, f, free_nodes).norm(), 1e-9 * applied.norm());
+}
+
+TEST_P(ElasticBodyTest, IsMovable) {
+  Scene scene = MakeScene(GetParam(), true);
+  const Eigen::VectorXd before = scene.body.unit_driven_translation_fields().col(2);
+  ElasticBody moved = std::move(scene.body);
+  const Eigen::VectorXd after =
+      moved.SolveDisplacement(Eigen::VectorXd::Zero(moved.num_dofs()), Eigen::Vector3d::UnitZ());
+  EXPECT_LE((before - after).norm(), 1e-12 * before.norm());
+}
+
+INSTANTIATE_TEST_SUITE_P(Orders, ElasticBodyTest,
+                         ::testing::Values(ElementOrder::kTet4, ElementOrder::kTet10),
+                         testing::OrderName);
+
+std::string ErrorOf(ElasticBody::Spec spec) {
+  try {
+    ElasticBody body(std::move(spec));
+  } catch (const InputError& e) {
+    return e.what();
+  }
+  return "";
+}
+
+TEST(ElasticBodyInput, RejectsBadSpecsWithAClearMessage) {
+  const BoxMeshSpec box = Box(0.10, 0.02, 0.02, 4, 1, 1, ElementOrder::kTet4);
+  ElasticBody::Spec good;
+  good.mesh = MakeBoxMesh(box);
+  good.material = kRed;
+  good.clamped_nodes = NodesOnBoxFace(good.mesh, box, BoxFace::kXMin);
+  EXPECT_EQ(ErrorOf(good), "");
+
+  ElasticBody::Spec s = good;
+  s.clamped_nodes.clear();
+  EXPECT_NE(ErrorOf(s).find("no clamped or driven nodes"), std::string::npos);
+  s = good;
+  s.material.youngs_modulus_pa = 0.0;
+  EXPECT_NE(ErrorOf(s).find("youngs_modulus_pa"), std::string::npos);
+  s = good;
+  s.material.poisson_ratio = 0.5;
+  EXPECT_NE(ErrorOf(s).find("poisson_ratio"), std::string::npos);
+  s = good;
+  s.mesh.nodes_m.row(s.mesh.elements(3, 1)) = s.mesh.nodes_m.row(s.mesh.elements(3, 0));  // coincident
+  EXPECT_NE(ErrorOf(s).find("degenerate or inverted"), std::string::npos);
+  s = good;
+  s.driven_nodes = {s.clamped_nodes.front()};
+  EXPECT_NE(ErrorOf(s).find("both clamped and driven"), std::string::npos);
+  s = good;
+  s.clamped_nodes.push_back(s.mesh.num_nodes());
+  EXPECT_NE(ErrorOf(s).find("clamped node"), std::string::npos);
+  s = good;
+  s.clamped_nodes = {0};  // one node cannot stop rotations about itself
+  EXPECT_NE(ErrorOf(s).find("singular stiffness"), std::string::npos);
+  s.clamped_nodes = {0, 1, 2};  // three nodes on the y = z = min edge: collinear
+  EXPECT_NE(ErrorOf(s).find("lie on one line"), std::string::npos);
+
+  const ElasticBody body(good);
+  EXPECT_THROW(body.SolveDisplacement(Eigen::VectorXd::Zero(5), Eigen::Vector3d::Zero()), InputError);
+  const std::vector<int> bad = {-1};
+  EXPECT_THROW(body.ComplianceBlock(bad), InputError);
+}
+
+}  // namespace
+}  // namespace hapco::fem
