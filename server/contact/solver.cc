@@ -133,10 +133,12 @@ double ComputeRho(const ContactProblem& problem, const SolverParameters& p,
 }
 
 // One Gauss-Seidel sweep (paper 3.3.1 / 3.3.2, or exact local solves). Updates r and u in
-// place; returns Σ ‖Δr_α‖²/ρ_α² and adds the local iteration count to *inner.
+// place; returns Σ ‖Δr_α‖²/ρ_α², adds the local iteration count to *inner and the number of
+// local Uzawa loops stopped by max_inner_iterations to *inner_limit_hits.
 double GaussSeidelSweep(SolverKind kind, const ContactProblem& problem,
                         const SolverParameters& p, const Eigen::Ref<const Eigen::VectorXd>& rho,
-                        Eigen::VectorXd& r, Eigen::Ref<Eigen::VectorXd> u, int* inner) {
+                        Eigen::VectorXd& r, Eigen::Ref<Eigen::VectorXd> u, int* inner,
+                        int* inner_limit_hits) {
   const auto& w = problem.flexibility_m_per_n;
   const Eigen::Index m = problem.num_contacts();
   double sum = 0.0;
@@ -160,14 +162,21 @@ double GaussSeidelSweep(SolverKind kind, const ContactProblem& problem,
         // until ‖Δr_α‖/ρ < ε₂. Started from the current r_α rather than the paper's 0, so
         // that a warm start carries through the inner loop too.
         Eigen::Vector3d rj = r_old;
+        bool met = false;
         for (int j = 0; j < p.max_inner_iterations; ++j) {
           const Eigen::Vector3d uj = waa * rj + q;
           const Eigen::Vector3d next = UzawaPredictorCorrector(rj, uj, mu, rho_a);
           *inner += 1;
           const double step_m = (next - rj).norm() / rho_a;
           rj = next;
-          if (!(step_m >= p.local_tolerance_m)) break;  // also stops on NaN
+          if (!(step_m >= p.local_tolerance_m)) {  // also stops on NaN (caught by the caller)
+            met = step_m < p.local_tolerance_m;
+            break;
+          }
         }
+        // An inner loop cut by the cap may even end where it started (a 2-cycle when ρ is
+        // too large), which would fool the outer test ‖Δr‖/ρ < ε₁: count it.
+        if (!met) *inner_limit_hits += 1;
         r_new = rj;
         break;
       }
@@ -235,6 +244,7 @@ SolverStatus Solve(SolverKind kind, const ContactProblem& problem,
   stats.status = SolverStatus::kMaxIterations;
   stats.iterations = 0;
   stats.inner_iterations = 0;
+  stats.inner_limit_hits = 0;
   stats.paper_error_m = 0.0;
   stats.fc3d_error = 0.0;
   stats.residual_history.clear();  // keeps its capacity
@@ -270,12 +280,16 @@ SolverStatus Solve(SolverKind kind, const ContactProblem& problem,
   while (m > 0) {
     r_previous = r;
     double sum;
+    int sweep_limit_hits = 0;
     if (kind == SolverKind::kGlobalUzawaJacobi) {
       sum = JacobiSweep(problem, rho, r, u, &stats.inner_iterations);
       u.noalias() = w * r;
       u += u_free;
     } else {
-      sum = GaussSeidelSweep(kind, problem, parameters, rho, r, u, &stats.inner_iterations);
+      sweep_limit_hits = 0;
+      sum = GaussSeidelSweep(kind, problem, parameters, rho, r, u, &stats.inner_iterations,
+                             &sweep_limit_hits);
+      stats.inner_limit_hits += sweep_limit_hits;
     }
     ++iteration;
     const double error = std::sqrt(sum);
@@ -288,7 +302,8 @@ SolverStatus Solve(SolverKind kind, const ContactProblem& problem,
     stats.paper_error_m = error;
     stats.residual_history.push_back(error);
     min_error = std::min(min_error, error);
-    bool converged = error < eps1;
+    // The paper test is only meaningful once every local problem met ε₂ (paper 3.3.1).
+    bool converged = error < eps1 && sweep_limit_hits == 0;
     if (!converged && parameters.fc3d_tolerance > 0.0) {
       converged = Fc3dFromState(problem.friction_coefficient, r, u, u_free) <
                   parameters.fc3d_tolerance;

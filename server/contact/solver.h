@@ -78,7 +78,11 @@ std::string_view StatusName(SolverStatus status);
 struct SolverStats {
   SolverStatus status = SolverStatus::kMaxIterations;
   int iterations = 0;        // outer iterations (sweeps) performed
-  int inner_iterations = 0;  // total local iterations (Uzawa inner steps / local solves)
+  int inner_iterations = 0;  // total local updates (Uzawa inner steps, predictor-correctors or
+                             // exact local solves)
+  // kLocalUzawa: inner loops stopped by max_inner_iterations before meeting ε₂ (all sweeps).
+  // A sweep with such a loop is never declared converged.
+  int inner_limit_hits = 0;
   // Always set at exit: the outer test value sqrt(Σ ‖Δr_α‖²/ρ_α²) of the last iteration, m.
   double paper_error_m = 0.0;
   // Always set at exit: Fc3dError of the returned force (dimensionless).

@@ -196,6 +196,20 @@ TEST(SolverTest, JacobiWithHugeRhoDivergesWithFiniteForces) {
   EXPECT_LT(res.stats.iterations, params.max_iterations);
 }
 
+// Local Uzawa with ρ far too large: each inner loop oscillates (r -> big -> 0 -> ...) and can
+// end where it started, so ‖Δr‖/ρ = 0 although nothing is solved. Must not pass as converged.
+TEST(SolverTest, LocalUzawaWithHugeRhoIsNotReportedConverged) {
+  const ContactProblem p = RandomSpdProblem(30, 9u, 8.0, 0.5);
+  SolverParameters params = Tight();
+  params.rho_scale = 20.0;
+  params.max_iterations = 50;
+  const SolverResult res = RunSolver(SolverKind::kLocalUzawa, p, params);
+  EXPECT_NE(res.stats.status, SolverStatus::kConverged);
+  EXPECT_GT(res.stats.inner_limit_hits, 0);
+  EXPECT_TRUE(res.force_n.allFinite());
+  EXPECT_GT(res.stats.fc3d_error, 1e-3);  // and the residual says so
+}
+
 TEST(SolverTest, TinyTimeBudgetIsReportedWithFiniteIterate) {
   const ContactProblem p = RandomSpdProblem(60, 4u);
   SolverParameters params = Tight();
