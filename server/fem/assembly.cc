@@ -1,8 +1,10 @@
 #include "fem/assembly.h"
 
 #include <algorithm>
-#include <Eigen/Geometry>
+#include <array>
 #include <vector>
+
+#include <Eigen/Geometry>
 
 #include "common/error.h"
 #include "fem/element_stiffness.h"

@@ -1,12 +1,13 @@
 #include "fem/box_mesh.h"
 
 #include <algorithm>
-#include <Eigen/Geometry>
 #include <array>
 #include <cmath>
 #include <cstdint>
 #include <string>
 #include <unordered_map>
+
+#include <Eigen/Geometry>
 
 #include "common/error.h"
 

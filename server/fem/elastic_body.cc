@@ -1,8 +1,11 @@
 #include "fem/elastic_body.h"
 
 #include <algorithm>
-#include <Eigen/Geometry>
+#include <iterator>
 #include <string>
+#include <utility>
+
+#include <Eigen/Geometry>
 
 // GCC's -Wnull-dereference fires inside Eigen's CHOLMOD view of the sparse matrix (an inlined
 // path for an empty matrix that cannot occur here: K_ff has nf > 0 columns).

@@ -1,11 +1,12 @@
 #include "fem/mesh.h"
 
 #include <algorithm>
-#include <Eigen/Geometry>
 #include <cmath>
 #include <map>
 #include <sstream>
 #include <string>
+
+#include <Eigen/Geometry>
 
 #include "common/error.h"
 #include "fem/element_stiffness.h"
