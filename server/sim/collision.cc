@@ -1,0 +1,462 @@
+#include "sim/collision.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numeric>
+#include <string>
+#include <utility>
+
+#include <Eigen/Geometry>
+
+#include "common/error.h"
+
+namespace hapco::sim {
+namespace {
+
+constexpr int kLeafSize = 4;
+// Gaps closer than this fraction of the mean reference edge are ties (round-off between
+// coplanar faces sharing an edge).
+constexpr double kTieRelative = 1e-9;
+
+// Ericson, Real-Time Collision Detection §5.1.5: barycentric coordinates (of a, b, c) of the
+// point of triangle abc closest to p, by Voronoi region.
+Eigen::Vector3d ClosestPointBarycentric(const Eigen::Vector3d& p, const Eigen::Vector3d& a,
+                                        const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
+  const Eigen::Vector3d ab = b - a;
+  const Eigen::Vector3d ac = c - a;
+  const Eigen::Vector3d ap = p - a;
+  const double d1 = ab.dot(ap);
+  const double d2 = ac.dot(ap);
+  if (d1 <= 0.0 && d2 <= 0.0) return {1.0, 0.0, 0.0};  // vertex a
+  const Eigen::Vector3d bp = p - b;
+  const double d3 = ab.dot(bp);
+  const double d4 = ac.dot(bp);
+  if (d3 >= 0.0 && d4 <= d3) return {0.0, 1.0, 0.0};  // vertex b
+  const double vc = d1 * d4 - d3 * d2;
+  if (vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0) {  // edge ab
+    const double v = d1 / (d1 - d3);
+    return {1.0 - v, v, 0.0};
+  }
+  const Eigen::Vector3d cp = p - c;
+  const double d5 = ab.dot(cp);
+  const double d6 = ac.dot(cp);
+  if (d6 >= 0.0 && d5 <= d6) return {0.0, 0.0, 1.0};  // vertex c
+  const double vb = d5 * d2 - d1 * d6;
+  if (vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0) {  // edge ac
+    const double w = d2 / (d2 - d6);
+    return {1.0 - w, 0.0, w};
+  }
+  const double va = d3 * d6 - d5 * d4;
+  if (va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0) {  // edge bc
+    const double w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+    return {0.0, 1.0 - w, w};
+  }
+  const double denom = 1.0 / (va + vb + vc);  // interior
+  const double v = vb * denom;
+  const double w = vc * denom;
+  return {1.0 - v - w, v, w};
+}
+
+// Barycentric coordinates of the normal projection of p onto the plane of abc.
+Eigen::Vector3d ProjectionBarycentric(const Eigen::Vector3d& p, const Eigen::Vector3d& a,
+                                      const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
+  const Eigen::Vector3d v0 = b - a;
+  const Eigen::Vector3d v1 = c - a;
+  const Eigen::Vector3d v2 = p - a;
+  const double d00 = v0.dot(v0);
+  const double d01 = v0.dot(v1);
+  const double d11 = v1.dot(v1);
+  const double d20 = v2.dot(v0);
+  const double d21 = v2.dot(v1);
+  const double denom = d00 * d11 - d01 * d01;
+  const double v = (d11 * d20 - d01 * d21) / denom;
+  const double w = (d00 * d21 - d01 * d20) / denom;
+  return {1.0 - v - w, v, w};
+}
+
+// Rows n, t1, t2 (algorithms.md §2). t1 from e_x, or e_y when n is close to ±e_x.
+Eigen::Matrix3d FrameFromNormal(const Eigen::Vector3d& n) {
+  const Eigen::Vector3d axis =
+      std::abs(n.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
+  const Eigen::Vector3d t1 = (axis - axis.dot(n) * n).normalized();
+  const Eigen::Vector3d t2 = n.cross(t1);
+  Eigen::Matrix3d frame;
+  frame.row(0) = n.transpose();
+  frame.row(1) = t1.transpose();
+  frame.row(2) = t2.transpose();
+  return frame;
+}
+
+Eigen::Vector3d Row(const PointsRef& points, int i) { return points.row(i).transpose(); }
+
+void CheckParameters(const CollisionParameters& p) {
+  if (!(std::isfinite(p.activation_gap_m) && p.activation_gap_m >= 0.0)) {
+    throw InputError("collision activation_gap_m must be finite and >= 0, got " +
+                     std::to_string(p.activation_gap_m));
+  }
+  if (!(std::isfinite(p.max_penetration_m) && p.max_penetration_m >= 0.0)) {
+    throw InputError("collision max_penetration_m must be finite and >= 0, got " +
+                     std::to_string(p.max_penetration_m));
+  }
+  if (!(p.edge_tolerance >= 0.0 && p.edge_tolerance <= 0.1)) {
+    throw InputError("collision edge_tolerance must be in [0, 0.1] (barycentric slack), got " +
+                     std::to_string(p.edge_tolerance));
+  }
+  if (!(p.min_normal_opposition >= -1.0 && p.min_normal_opposition <= 1.0)) {
+    throw InputError("collision min_normal_opposition must be in [-1, 1] (a cosine), got " +
+                     std::to_string(p.min_normal_opposition));
+  }
+}
+
+}  // namespace
+
+ContactDetector::ContactDetector(std::vector<fem::SurfaceTriangle> obstacle_triangles,
+                                 const PointsRef& obstacle_reference_positions_m,
+                                 std::vector<int> tool_nodes,
+                                 std::vector<Eigen::Vector3d> tool_normals)
+    : triangles_(std::move(obstacle_triangles)),
+      tool_nodes_(std::move(tool_nodes)),
+      tool_normals_(std::move(tool_normals)),
+      num_obstacle_nodes_(static_cast<int>(obstacle_reference_positions_m.rows())) {
+  if (triangles_.empty()) throw InputError("contact detector: no obstacle triangles given");
+  if (!obstacle_reference_positions_m.allFinite()) {
+    throw InputError("contact detector: non-finite obstacle reference position");
+  }
+  const int n_tri = static_cast<int>(triangles_.size());
+  std::vector<Eigen::Vector3d> centroids(static_cast<std::size_t>(n_tri));
+  double edge_sum_m = 0.0;
+  for (int t = 0; t < n_tri; ++t) {
+    const auto& tri = triangles_[static_cast<std::size_t>(t)];
+    for (int id : tri.corners) {
+      if (id < 0 || id >= num_obstacle_nodes_) {
+        throw InputError("contact detector: obstacle triangle " + std::to_string(t) +
+                         " has corner node " + std::to_string(id) + " outside [0, " +
+                         std::to_string(num_obstacle_nodes_) + ")");
+      }
+    }
+    const int midsides_given = static_cast<int>(
+        std::count_if(tri.midsides.begin(), tri.midsides.end(), [](int m) { return m >= 0; }));
+    if (midsides_given != 0 && midsides_given != 3) {
+      throw InputError("contact detector: obstacle triangle " + std::to_string(t) +
+                       " has some but not all midside nodes (give 3 for Tet10, none for Tet4)");
+    }
+    for (int id : tri.midsides) {
+      if (id >= num_obstacle_nodes_) {
+        throw InputError("contact detector: obstacle triangle " + std::to_string(t) +
+                         " has midside node " + std::to_string(id) + " outside [0, " +
+                         std::to_string(num_obstacle_nodes_) + ")");
+      }
+    }
+    const Eigen::Vector3d a = Row(obstacle_reference_positions_m, tri.corners[0]);
+    const Eigen::Vector3d b = Row(obstacle_reference_positions_m, tri.corners[1]);
+    const Eigen::Vector3d c = Row(obstacle_reference_positions_m, tri.corners[2]);
+    const double longest_m = std::max({(b - a).norm(), (c - b).norm(), (a - c).norm()});
+    if (!((b - a).cross(c - a).norm() > 1e-12 * longest_m * longest_m)) {
+      throw InputError("contact detector: obstacle triangle " + std::to_string(t) +
+                       " is degenerate (zero area) in the reference configuration");
+    }
+    centroids[static_cast<std::size_t>(t)] = (a + b + c) / 3.0;
+    edge_sum_m += (b - a).norm() + (c - b).norm() + (a - c).norm();
+  }
+  tie_tolerance_m_ = kTieRelative * edge_sum_m / (3.0 * n_tri);
+
+  for (int id : tool_nodes_) {
+    if (id < 0) throw InputError("contact detector: negative tool node id " + std::to_string(id));
+    max_tool_node_ = std::max(max_tool_node_, id);
+  }
+  if (!tool_normals_.empty()) {
+    if (tool_normals_.size() != tool_nodes_.size()) {
+      throw InputError("contact detector: " + std::to_string(tool_normals_.size()) +
+                       " tool normals for " + std::to_string(tool_nodes_.size()) +
+                       " tool nodes (give one per node, or none)");
+    }
+    for (const auto& n : tool_normals_) {
+      if (!(std::abs(n.norm() - 1.0) < 1e-6)) {
+        throw InputError("contact detector: tool normals must be unit vectors");
+      }
+    }
+  }
+
+  // Topology once, from the reference configuration: median split of the centroids along
+  // the longest axis of their bounds.
+  order_.resize(static_cast<std::size_t>(n_tri));
+  std::iota(order_.begin(), order_.end(), 0);
+  nodes_.reserve(static_cast<std::size_t>(2 * n_tri / kLeafSize + 2));
+  const int depth = BuildNode(centroids, 0, n_tri, 0);
+  stack_.reserve(static_cast<std::size_t>(2 * depth + 4));
+  triangle_boxes_.resize(static_cast<std::size_t>(n_tri));
+  candidates_.reserve(16);
+  stats_.triangles_total = n_tri;
+}
+
+// Returns the depth of the subtree.
+int ContactDetector::BuildNode(const std::vector<Eigen::Vector3d>& centroids, int begin,
+                               int end, int depth) {
+  const int index = static_cast<int>(nodes_.size());
+  nodes_.emplace_back();
+  if (end - begin <= kLeafSize) {
+    nodes_[static_cast<std::size_t>(index)].first = begin;
+    nodes_[static_cast<std::size_t>(index)].count = end - begin;
+    return depth;
+  }
+  Eigen::Vector3d lo = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity());
+  Eigen::Vector3d hi = -lo;
+  for (int i = begin; i < end; ++i) {
+    const auto& c = centroids[static_cast<std::size_t>(order_[static_cast<std::size_t>(i)])];
+    lo = lo.cwiseMin(c);
+    hi = hi.cwiseMax(c);
+  }
+  int axis = 0;
+  (hi - lo).maxCoeff(&axis);
+  const int mid = begin + (end - begin) / 2;
+  // Ties broken by triangle id so the topology does not depend on the sort implementation.
+  std::nth_element(order_.begin() + begin, order_.begin() + mid, order_.begin() + end,
+                   [&](int l, int r) {
+                     const double cl = centroids[static_cast<std::size_t>(l)][axis];
+                     const double cr = centroids[static_cast<std::size_t>(r)][axis];
+                     return cl < cr || (cl == cr && l < r);
+                   });
+  const int left_depth = BuildNode(centroids, begin, mid, depth + 1);
+  const int right = static_cast<int>(nodes_.size());
+  nodes_[static_cast<std::size_t>(index)].right = right;
+  const int right_depth = BuildNode(centroids, mid, end, depth + 1);
+  return std::max(left_depth, right_depth);
+}
+
+void ContactDetector::ValidateCall(const PointsRef& obstacle_positions_m,
+                                   const PointsRef& tool_positions_m,
+                                   const CollisionParameters& parameters) const {
+  if (obstacle_positions_m.rows() != num_obstacle_nodes_) {
+    throw InputError("contact detector: " + std::to_string(obstacle_positions_m.rows()) +
+                     " obstacle positions, expected " + std::to_string(num_obstacle_nodes_) +
+                     " (one per obstacle node)");
+  }
+  if (tool_positions_m.rows() <= max_tool_node_) {
+    throw InputError("contact detector: " + std::to_string(tool_positions_m.rows()) +
+                     " tool positions, but tool node " + std::to_string(max_tool_node_) +
+                     " is a candidate");
+  }
+  CheckParameters(parameters);
+}
+
+void ContactDetector::Refit(const PointsRef& obstacle_positions_m,
+                            const CollisionParameters& parameters) {
+  // A qualifying node lies within max(activation, penetration) of the face plane and its
+  // projection is within edge_tolerance (barycentric) of the face, i.e. at most
+  // 2·edge_tolerance·extent outside the face's box along any axis (two coordinates can be
+  // negative). Inflating each triangle's box by that margin makes the query a point-in-box
+  // test that can never miss a pair the exact test would accept.
+  const double normal_margin_m =
+      std::max(parameters.activation_gap_m, parameters.max_penetration_m);
+  for (std::size_t slot = 0; slot < order_.size(); ++slot) {
+    const auto& tri = triangles_[static_cast<std::size_t>(order_[slot])];
+    const Eigen::Vector3d a = Row(obstacle_positions_m, tri.corners[0]);
+    const Eigen::Vector3d b = Row(obstacle_positions_m, tri.corners[1]);
+    const Eigen::Vector3d c = Row(obstacle_positions_m, tri.corners[2]);
+    Box& box = triangle_boxes_[slot];
+    box.min = a.cwiseMin(b).cwiseMin(c);
+    box.max = a.cwiseMax(b).cwiseMax(c);
+    const double extent_m = (box.max - box.min).maxCoeff();
+    const double margin_m =
+        normal_margin_m + (2.0 * parameters.edge_tolerance + 1e-12) * extent_m;
+    box.min.array() -= margin_m;
+    box.max.array() += margin_m;
+  }
+  // Children follow their parent, so a reverse sweep sees children first.
+  for (auto node = nodes_.rbegin(); node != nodes_.rend(); ++node) {
+    if (node->count > 0) {
+      node->box = triangle_boxes_[static_cast<std::size_t>(node->first)];
+      for (int i = 1; i < node->count; ++i) {
+        const Box& b = triangle_boxes_[static_cast<std::size_t>(node->first + i)];
+        node->box.min = node->box.min.cwiseMin(b.min);
+        node->box.max = node->box.max.cwiseMax(b.max);
+      }
+    } else {
+      const auto self = static_cast<std::size_t>(nodes_.rend() - node - 1);
+      const Box& l = nodes_[self + 1].box;
+      const Box& r = nodes_[static_cast<std::size_t>(node->right)].box;
+      node->box.min = l.min.cwiseMin(r.min);
+      node->box.max = l.max.cwiseMax(r.max);
+    }
+  }
+}
+
+void ContactDetector::TestTriangle(int triangle, const Eigen::Vector3d& x, int tool_index,
+                                   const PointsRef& obstacle_positions_m,
+                                   const CollisionParameters& parameters) {
+  ++stats_.triangles_tested;
+  const auto& tri = triangles_[static_cast<std::size_t>(triangle)];
+  const Eigen::Vector3d a = Row(obstacle_positions_m, tri.corners[0]);
+  const Eigen::Vector3d b = Row(obstacle_positions_m, tri.corners[1]);
+  const Eigen::Vector3d c = Row(obstacle_positions_m, tri.corners[2]);
+  const Eigen::Vector3d cross = (b - a).cross(c - a);
+  const double twice_area_m2 = cross.norm();
+  if (!(twice_area_m2 > 0.0)) return;  // collapsed (or non-finite) face: no normal
+  const Eigen::Vector3d n = cross / twice_area_m2;
+  if (!tool_normals_.empty() &&
+      -n.dot(tool_normals_[static_cast<std::size_t>(tool_index)]) <
+          parameters.min_normal_opposition) {
+    return;
+  }
+  const double gap_m = (x - a).dot(n);
+  if (!(gap_m < parameters.activation_gap_m && gap_m >= -parameters.max_penetration_m)) return;
+  const Eigen::Vector3d projection = ProjectionBarycentric(x, a, b, c);
+  if (!(projection.minCoeff() >= -parameters.edge_tolerance)) return;
+  // Inside (or within the slack of) the face: the closest point is the projection itself, or
+  // for a projection just outside an edge the nearest point of that edge.
+  const Eigen::Vector3d bary =
+      projection.minCoeff() >= 0.0 ? projection : ClosestPointBarycentric(x, a, b, c);
+  Candidate& candidate = candidates_.emplace_back();
+  candidate.triangle = triangle;
+  candidate.gap_m = gap_m;
+  candidate.point_m = bary[0] * a + bary[1] * b + bary[2] * c;
+  candidate.normal = n;
+  candidate.barycentric = bary;
+}
+
+void ContactDetector::Select(int tool_index, std::vector<ContactPoint>* contacts) const {
+  if (candidates_.empty()) return;
+  // Order-independent choice (the tree and the brute force visit faces in different
+  // orders): smallest |gap|, then, among ties within round-off, the lowest triangle index.
+  double best_abs_gap_m = std::numeric_limits<double>::infinity();
+  for (const auto& c : candidates_) best_abs_gap_m = std::min(best_abs_gap_m, std::abs(c.gap_m));
+  const Candidate* best = nullptr;
+  for (const auto& c : candidates_) {
+    if (std::abs(c.gap_m) <= best_abs_gap_m + tie_tolerance_m_ &&
+        (best == nullptr || c.triangle < best->triangle)) {
+      best = &c;
+    }
+  }
+  const auto& tri = triangles_[static_cast<std::size_t>(best->triangle)];
+  ContactPoint& contact = contacts->emplace_back();
+  contact.tool_node = tool_nodes_[static_cast<std::size_t>(tool_index)];
+  contact.obstacle_triangle = best->triangle;
+  contact.obstacle_nodes.fill(-1);
+  contact.weights.fill(0.0);
+  const Eigen::Vector3d& l = best->barycentric;
+  if (tri.midsides[0] < 0) {
+    contact.num_obstacle_nodes = 3;
+    for (int k = 0; k < 3; ++k) {
+      contact.obstacle_nodes[static_cast<std::size_t>(k)] = tri.corners[static_cast<std::size_t>(k)];
+      contact.weights[static_cast<std::size_t>(k)] = l[k];
+    }
+  } else {
+    // Quadratic 6-node triangle: corner k: l_k (2 l_k − 1); midside on edge (k, k+1):
+    // 4 l_k l_{k+1}. They sum to 1 for any barycentric l.
+    contact.num_obstacle_nodes = 6;
+    for (int k = 0; k < 3; ++k) {
+      const auto corner = static_cast<std::size_t>(k);
+      const auto mid = static_cast<std::size_t>(3 + k);
+      contact.obstacle_nodes[corner] = tri.corners[corner];
+      contact.obstacle_nodes[mid] = tri.midsides[corner];
+      contact.weights[corner] = l[k] * (2.0 * l[k] - 1.0);
+      contact.weights[mid] = 4.0 * l[k] * l[(k + 1) % 3];
+    }
+  }
+  contact.frame = FrameFromNormal(best->normal);
+  contact.obstacle_point_m = best->point_m;
+  contact.gap_m = best->gap_m;
+}
+
+void ContactDetector::Detect(const PointsRef& obstacle_positions_m,
+                             const PointsRef& tool_positions_m,
+                             const CollisionParameters& parameters,
+                             std::vector<ContactPoint>* contacts) {
+  HAPCO_ASSERT(contacts != nullptr, "Detect needs an output vector");
+  ValidateCall(obstacle_positions_m, tool_positions_m, parameters);
+  Refit(obstacle_positions_m, parameters);
+  contacts->clear();
+  stats_ = DetectorStats{};
+  stats_.triangles_total = static_cast<std::int64_t>(triangles_.size());
+  for (std::size_t i = 0; i < tool_nodes_.size(); ++i) {
+    const Eigen::Vector3d x = Row(tool_positions_m, tool_nodes_[i]);
+    ++stats_.queries;
+    candidates_.clear();
+    stack_.clear();
+    stack_.push_back(0);
+    while (!stack_.empty()) {
+      const BvhNode& node = nodes_[static_cast<std::size_t>(stack_.back())];
+      const int self = stack_.back();
+      stack_.pop_back();
+      ++stats_.bvh_nodes_visited;
+      if ((x.array() < node.box.min.array()).any() || (x.array() > node.box.max.array()).any()) {
+        continue;
+      }
+      if (node.count > 0) {
+        for (int s = node.first; s < node.first + node.count; ++s) {
+          if ((x.array() < triangle_boxes_[static_cast<std::size_t>(s)].min.array()).any() ||
+              (x.array() > triangle_boxes_[static_cast<std::size_t>(s)].max.array()).any()) {
+            continue;
+          }
+          TestTriangle(order_[static_cast<std::size_t>(s)], x, static_cast<int>(i),
+                       obstacle_positions_m, parameters);
+        }
+      } else {
+        stack_.push_back(node.right);
+        stack_.push_back(self + 1);
+      }
+    }
+    Select(static_cast<int>(i), contacts);
+  }
+}
+
+void ContactDetector::DetectBruteForce(const PointsRef& obstacle_positions_m,
+                                       const PointsRef& tool_positions_m,
+                                       const CollisionParameters& parameters,
+                                       std::vector<ContactPoint>* contacts) {
+  HAPCO_ASSERT(contacts != nullptr, "DetectBruteForce needs an output vector");
+  ValidateCall(obstacle_positions_m, tool_positions_m, parameters);
+  contacts->clear();
+  stats_ = DetectorStats{};
+  stats_.triangles_total = static_cast<std::int64_t>(triangles_.size());
+  for (std::size_t i = 0; i < tool_nodes_.size(); ++i) {
+    const Eigen::Vector3d x = Row(tool_positions_m, tool_nodes_[i]);
+    ++stats_.queries;
+    candidates_.clear();
+    for (int t = 0; t < static_cast<int>(triangles_.size()); ++t) {
+      TestTriangle(t, x, static_cast<int>(i), obstacle_positions_m, parameters);
+    }
+    Select(static_cast<int>(i), contacts);
+  }
+}
+
+std::vector<Eigen::Vector3d> CandidateNodeNormals(const fem::Mesh& mesh,
+                                                  const std::vector<fem::SurfaceTriangle>& surface,
+                                                  const std::vector<int>& nodes) {
+  std::vector<int> slot(static_cast<std::size_t>(mesh.num_nodes()), -1);
+  for (std::size_t i = 0; i < nodes.size(); ++i) {
+    const int id = nodes[i];
+    if (id < 0 || id >= mesh.num_nodes()) {
+      throw InputError("candidate node " + std::to_string(id) + " is not a node of the mesh");
+    }
+    slot[static_cast<std::size_t>(id)] = static_cast<int>(i);
+  }
+  std::vector<Eigen::Vector3d> sums(nodes.size(), Eigen::Vector3d::Zero());
+  for (const auto& tri : surface) {
+    const bool on_patch = std::all_of(tri.corners.begin(), tri.corners.end(), [&](int id) {
+      return id >= 0 && id < mesh.num_nodes() && slot[static_cast<std::size_t>(id)] >= 0;
+    });
+    if (!on_patch) continue;
+    const Eigen::Vector3d a = mesh.nodes_m.row(tri.corners[0]).transpose();
+    const Eigen::Vector3d b = mesh.nodes_m.row(tri.corners[1]).transpose();
+    const Eigen::Vector3d c = mesh.nodes_m.row(tri.corners[2]).transpose();
+    const Eigen::Vector3d area_normal = (b - a).cross(c - a);  // |.| = 2 area: area weighting
+    for (int id : tri.corners) sums[static_cast<std::size_t>(slot[static_cast<std::size_t>(id)])] += area_normal;
+    for (int id : tri.midsides) {
+      if (id >= 0 && id < mesh.num_nodes() && slot[static_cast<std::size_t>(id)] >= 0) {
+        sums[static_cast<std::size_t>(slot[static_cast<std::size_t>(id)])] += area_normal;
+      }
+    }
+  }
+  for (std::size_t i = 0; i < sums.size(); ++i) {
+    if (!(sums[i].norm() > 0.0)) {
+      throw InputError("candidate node " + std::to_string(nodes[i]) +
+                       " touches no surface triangle whose corners are all candidates");
+    }
+    sums[i].normalize();
+  }
+  return sums;
+}
+
+}  // namespace hapco::sim

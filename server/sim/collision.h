@@ -1,0 +1,167 @@
+#pragma once
+// Collision detection between the tool (the paper's green body) and the obstacle (red body):
+// node-to-surface pairs between candidate tool nodes and obstacle boundary triangles, with the
+// contact frame of algorithms.md §2 (n points from the red surface towards the green body,
+// local vectors ordered [n, t1, t2], u_n >= 0 separated).
+//
+// Geometry is first order: a face is the flat triangle through its three corner nodes, also
+// for Tet10 faces. The gap, the closest point and the frame come from that flat triangle; for
+// a Tet10 face the weights that spread the obstacle point onto its six nodes are the
+// quadratic 6-node triangle shape functions at the closest point's barycentric coordinates.
+// While a face's midside nodes stay at their edge midpoints (straight edges) the weights
+// reproduce the flat point exactly; on a curved (deformed) Tet10 face the difference is of the
+// order of the face curvature times the squared face size, which we neglect.
+//
+// Search cost: an AABB tree over the obstacle triangles is built once (topology) and refitted
+// on every Detect (the obstacle deforms). The refit is linear in the triangles given to the
+// detector (pass only the faces that can ever be touched); each query visits O(log n) boxes
+// and tests only the few triangles whose inflated box holds the node.
+#include <array>
+#include <cstdint>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "fem/mesh.h"
+
+namespace hapco::sim {
+
+using PointsRef = Eigen::Ref<const Eigen::Matrix<double, Eigen::Dynamic, 3>>;
+
+// One active contact: a tool node facing a point on an obstacle surface triangle.
+struct ContactPoint {
+  int tool_node = -1;          // node id in the tool mesh
+  int obstacle_triangle = -1;  // index into the detector's obstacle triangle list
+  // Nodes carrying the obstacle side: 3 corners (Tet4 face) or 3 corners then the midsides on
+  // edges (c0,c1) (c1,c2) (c2,c0) (Tet10 face); unused entries are -1 with weight 0.
+  std::array<int, 6> obstacle_nodes{};
+  // Shape-function weights of the obstacle point (sum to 1), dimensionless.
+  std::array<double, 6> weights{};
+  int num_obstacle_nodes = 0;  // 3 or 6
+  // Rows n, t1, t2 in world axes: n is the outward normal of the obstacle face (towards the
+  // tool); t1 = normalized e_x minus its normal part (e_y when n is near ±e_x), t2 = n × t1,
+  // so t1 × t2 = n (right-handed, deterministic from n).
+  Eigen::Matrix3d frame = Eigen::Matrix3d::Identity();
+  Eigen::Vector3d obstacle_point_m = Eigen::Vector3d::Zero();  // closest point on the face, m
+  // Signed normal gap (tool node − obstacle point)·n, m: >= 0 separated, < 0 penetrating.
+  double gap_m = 0.0;
+};
+
+struct CollisionParameters {
+  // A pair is active when gap < activation_gap_m, m (>= 0).
+  double activation_gap_m = 5e-4;
+  // Pairs deeper than this are ignored (a node that far behind a face is on the wrong side,
+  // e.g. facing the opposite face of the obstacle), m (>= 0). Keep it below half the
+  // obstacle's thickness.
+  double max_penetration_m = 1e-3;
+  // Barycentric slack, dimensionless: a node whose normal projection lies within this of a
+  // face's edges counts as inside it, so a node exactly on an edge or vertex is found despite
+  // round-off (and is then assigned to one face only, see ContactDetector).
+  double edge_tolerance = 1e-9;
+  // Normal compatibility, dimensionless: with tool normals given, a face qualifies only when
+  // −n_face·n_tool >= this (0.5: the face normal within 60° of the reversed tool normal).
+  // It keeps a tool node lying on an obstacle edge on the face it rests on, not on the side.
+  double min_normal_opposition = 0.5;
+};
+
+// Work counters of the last Detect call, for tests and benchmarks.
+struct DetectorStats {
+  std::int64_t queries = 0;             // tool nodes searched
+  std::int64_t triangles_tested = 0;    // exact point-triangle tests
+  std::int64_t bvh_nodes_visited = 0;   // boxes tested (0 for the brute-force path)
+  std::int64_t triangles_total = 0;     // obstacle triangles in the detector
+};
+
+class ContactDetector {
+ public:
+  // obstacle_triangles: the obstacle's boundary faces (fem::BoundaryTriangles, possibly
+  // filtered to the faces that can ever be touched), outward right-hand normals.
+  // obstacle_reference_positions_m: the obstacle's nodes (N_o x 3) in the reference
+  // configuration; they shape the tree topology, later calls only refit the boxes.
+  // tool_nodes: candidate tool node ids (e.g. the tool's bottom face).
+  // tool_normals: outward unit normal of the tool's candidate surface at each tool node
+  // (reference configuration, see CandidateNodeNormals), or empty to skip the normal check.
+  // Throws InputError for an empty triangle list, node ids out of range, a degenerate face,
+  // a face with only some midsides, negative tool node ids, or a normal count / length that
+  // does not match.
+  ContactDetector(std::vector<fem::SurfaceTriangle> obstacle_triangles,
+                  const PointsRef& obstacle_reference_positions_m, std::vector<int> tool_nodes,
+                  std::vector<Eigen::Vector3d> tool_normals = {});
+
+  // Current (deformed) node positions: obstacle N_o x 3, tool N_t x 3 (reference +
+  // displacement), m. Fills *contacts (cleared first, in tool_nodes order). For each tool
+  // node: among faces whose flat normal projection holds the node (within edge_tolerance),
+  // that pass the normal check, with -max_penetration <= gap < activation_gap, the one with
+  // the smallest |gap|; ties within round-off (a node on an edge shared by coplanar faces) go
+  // to the lowest triangle index, so every node gives at most one contact. A node whose
+  // projection misses every face (beyond a convex edge, outside the footprint) has none.
+  // Allocation-free once *contacts has capacity for all tool nodes (reserve it, or reuse).
+  // Throws InputError for position arrays too short or invalid parameters.
+  void Detect(const PointsRef& obstacle_positions_m, const PointsRef& tool_positions_m,
+              const CollisionParameters& parameters, std::vector<ContactPoint>* contacts);
+
+  // Same rules, every triangle tested for every node: the reference for tests/benchmarks.
+  void DetectBruteForce(const PointsRef& obstacle_positions_m, const PointsRef& tool_positions_m,
+                        const CollisionParameters& parameters,
+                        std::vector<ContactPoint>* contacts);
+
+  const DetectorStats& last_stats() const { return stats_; }
+  const std::vector<fem::SurfaceTriangle>& obstacle_triangles() const { return triangles_; }
+  const std::vector<int>& tool_nodes() const { return tool_nodes_; }
+  int bvh_node_count() const { return static_cast<int>(nodes_.size()); }
+
+ private:
+  struct Box {
+    Eigen::Vector3d min = Eigen::Vector3d::Zero();
+    Eigen::Vector3d max = Eigen::Vector3d::Zero();
+  };
+  // Leaves hold order_[first, first + count); an internal node (count == 0) has its left
+  // child right after it and its right child at `right`. Children follow their parent.
+  struct BvhNode {
+    Box box;
+    int first = 0;
+    int count = 0;
+    int right = -1;
+  };
+  struct Candidate {
+    int triangle = -1;
+    double gap_m = 0.0;
+    Eigen::Vector3d point_m = Eigen::Vector3d::Zero();
+    Eigen::Vector3d normal = Eigen::Vector3d::Zero();
+    Eigen::Vector3d barycentric = Eigen::Vector3d::Zero();
+  };
+
+  int BuildNode(const std::vector<Eigen::Vector3d>& centroids, int begin, int end, int depth);
+  void ValidateCall(const PointsRef& obstacle_positions_m, const PointsRef& tool_positions_m,
+                    const CollisionParameters& parameters) const;
+  void Refit(const PointsRef& obstacle_positions_m, const CollisionParameters& parameters);
+  // Exact test of one triangle; appends to candidates_ when the pair qualifies.
+  void TestTriangle(int triangle, const Eigen::Vector3d& x, int tool_index,
+                    const PointsRef& obstacle_positions_m, const CollisionParameters& parameters);
+  // Picks the winner among candidates_ and appends the contact.
+  void Select(int tool_index, std::vector<ContactPoint>* contacts) const;
+
+  std::vector<fem::SurfaceTriangle> triangles_;
+  std::vector<int> tool_nodes_;
+  std::vector<Eigen::Vector3d> tool_normals_;
+  int num_obstacle_nodes_ = 0;
+  int max_tool_node_ = -1;
+  double tie_tolerance_m_ = 0.0;  // |gap| differences below this are ties (round-off)
+
+  std::vector<int> order_;          // triangle ids in leaf order
+  std::vector<BvhNode> nodes_;      // nodes_[0] is the root
+  std::vector<Box> triangle_boxes_;  // per order_ slot, inflated by the search margin
+  std::vector<int> stack_;          // traversal stack, sized once
+  std::vector<Candidate> candidates_;  // per-query scratch, capacity reused
+  DetectorStats stats_;
+};
+
+// Outward unit normal at each of `nodes`: the area-weighted mean of the normals of the
+// triangles of `surface` whose three corners all belong to `nodes` (the candidate patch
+// itself, so a node on the patch's rim is not tilted by the adjacent side face). Throws
+// InputError for a node that touches no such triangle.
+std::vector<Eigen::Vector3d> CandidateNodeNormals(const fem::Mesh& mesh,
+                                                  const std::vector<fem::SurfaceTriangle>& surface,
+                                                  const std::vector<int>& nodes);
+
+}  // namespace hapco::sim

@@ -1,0 +1,587 @@
+// Collision detection (sim/collision.h): flat and deformed box obstacles, shared edges, the
+// tree against brute force, and the paper's two-body scene (algorithms.md §1-2).
+#include "sim/collision.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <cstdlib>
+#include <iostream>
+#include <limits>
+#include <new>
+#include <numbers>
+#include <random>
+#include <set>
+#include <string>
+#include <vector>
+
+#include <Eigen/Dense>
+
+#include "common/error.h"
+#include "fem/box_mesh.h"
+#include "fem/mesh.h"
+
+// Counts heap allocations while g_count_allocations is set (allocation-free Detect test).
+namespace {
+std::atomic<bool> g_count_allocations{false};
+std::atomic<long> g_allocations{0};
+}  // namespace
+
+// GCC flags free() on memory from a replaced operator new even though that new uses malloc.
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
+void* operator new(std::size_t size) {
+  if (g_count_allocations.load(std::memory_order_relaxed)) {
+    g_allocations.fetch_add(1, std::memory_order_relaxed);
+  }
+  if (void* p = std::malloc(size == 0 ? 1 : size)) return p;
+  throw std::bad_alloc();
+}
+void operator delete(void* p) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+#pragma GCC diagnostic pop
+
+namespace hapco::sim {
+namespace {
+
+using Points = Eigen::Matrix<double, Eigen::Dynamic, 3>;
+
+constexpr double kTight = 1e-12;
+
+fem::BoxMeshSpec ObstacleSpec(fem::ElementOrder order, Eigen::Vector3i divisions = {10, 2, 2}) {
+  fem::BoxMeshSpec spec;
+  spec.min_corner_m = Eigen::Vector3d::Zero();
+  spec.size_m = Eigen::Vector3d(0.10, 0.02, 0.02);
+  spec.divisions = divisions;
+  spec.order = order;
+  return spec;
+}
+
+std::vector<int> Iota(int n) {
+  std::vector<int> ids(static_cast<std::size_t>(n));
+  for (int i = 0; i < n; ++i) ids[static_cast<std::size_t>(i)] = i;
+  return ids;
+}
+
+Points ToPoints(const std::vector<Eigen::Vector3d>& v) {
+  Points p(static_cast<Eigen::Index>(v.size()), 3);
+  for (std::size_t i = 0; i < v.size(); ++i) p.row(static_cast<Eigen::Index>(i)) = v[i].transpose();
+  return p;
+}
+
+// Checks the invariants every contact must satisfy, against the obstacle positions.
+void ExpectWellFormed(const ContactPoint& c, const Points& obstacle, const Points& tool) {
+  const Eigen::Matrix3d& f = c.frame;
+  EXPECT_LT((f * f.transpose() - Eigen::Matrix3d::Identity()).norm(), 1e-12);
+  EXPECT_NEAR(f.determinant(), 1.0, 1e-12);
+  const Eigen::Vector3d n = f.row(0).transpose();
+  const Eigen::Vector3d t1 = f.row(1).transpose();
+  const Eigen::Vector3d t2 = f.row(2).transpose();
+  EXPECT_LT((t1.cross(t2) - n).norm(), 1e-12);
+  double sum = 0.0;
+  for (int k = 0; k < c.num_obstacle_nodes; ++k) {
+    sum += c.weights[static_cast<std::size_t>(k)];
+    const int node = c.obstacle_nodes[static_cast<std::size_t>(k)];
+    EXPECT_TRUE(node >= 0 && node < obstacle.rows());
+  }
+  for (int k = c.num_obstacle_nodes; k < 6; ++k) {
+    EXPECT_EQ(c.obstacle_nodes[static_cast<std::size_t>(k)], -1);
+    EXPECT_EQ(c.weights[static_cast<std::size_t>(k)], 0.0);
+  }
+  EXPECT_NEAR(sum, 1.0, 1e-12);
+  // Signed normal gap by definition.
+  const Eigen::Vector3d x = tool.row(c.tool_node).transpose();
+  EXPECT_NEAR(c.gap_m, (x - c.obstacle_point_m).dot(n), 1e-12);
+}
+
+// Σ w_i x_i = obstacle point (holds while Tet10 midsides sit at their edge midpoints).
+void ExpectWeightsReproducePoint(const ContactPoint& c, const Points& obstacle) {
+  Eigen::Vector3d weighted = Eigen::Vector3d::Zero();
+  for (int k = 0; k < c.num_obstacle_nodes; ++k) {
+    weighted += c.weights[static_cast<std::size_t>(k)] *
+                obstacle.row(c.obstacle_nodes[static_cast<std::size_t>(k)]).transpose();
+  }
+  EXPECT_LT((weighted - c.obstacle_point_m).norm(), 1e-14);
+}
+
+class FlatBoxTest : public ::testing::TestWithParam<fem::ElementOrder> {};
+
+TEST_P(FlatBoxTest, PointsAboveTopFaceGiveHeightAsGap) {
+  const auto spec = ObstacleSpec(GetParam());
+  const fem::Mesh mesh = fem::MakeBoxMesh(spec);
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> ux(0.0, 0.10), uy(0.0, 0.02), uh(0.0, 4.9e-4);
+  std::vector<Eigen::Vector3d> q;
+  std::vector<double> heights;
+  for (int i = 0; i < 200; ++i) {
+    heights.push_back(i < 5 ? 0.0 : uh(rng));
+    q.emplace_back(ux(rng), uy(rng), 0.02 + heights.back());
+  }
+  const Points tool = ToPoints(q);
+  ContactDetector detector(fem::BoundaryTriangles(mesh), mesh.nodes_m, Iota(tool.rows()));
+  std::vector<ContactPoint> contacts;
+  detector.Detect(mesh.nodes_m, tool, CollisionParameters{}, &contacts);
+  ASSERT_EQ(contacts.size(), q.size());
+  const int expected_nodes = GetParam() == fem::ElementOrder::kTet4 ? 3 : 6;
+  for (std::size_t i = 0; i < contacts.size(); ++i) {
+    const ContactPoint& c = contacts[i];
+    EXPECT_EQ(c.tool_node, static_cast<int>(i));
+    EXPECT_NEAR(c.gap_m, heights[i], kTight);
+    EXPECT_LT((c.frame.row(0).transpose() - Eigen::Vector3d::UnitZ()).norm(), kTight);
+    EXPECT_LT((c.obstacle_point_m - Eigen::Vector3d(q[i].x(), q[i].y(), 0.02)).norm(), kTight);
+    EXPECT_EQ(c.num_obstacle_nodes, expected_nodes);
+    ExpectWellFormed(c, mesh.nodes_m, tool);
+    ExpectWeightsReproducePoint(c, mesh.nodes_m);
+  }
+}
+
+TEST_P(FlatBoxTest, NoContactBeyondFootprintOrAboveActivationGap) {
+  const auto spec = ObstacleSpec(GetParam());
+  const fem::Mesh mesh = fem::MakeBoxMesh(spec);
+  CollisionParameters params;
+  params.activation_gap_m = 5e-4;
+  params.max_penetration_m = 1e-3;
+  const std::vector<Eigen::Vector3d> q = {
+      {0.05, 0.01, 0.02 + 6e-4},     // above the activation gap
+      {0.05, 0.01, 0.02 + 5e-4},     // exactly at it: active means gap < activation
+      {0.102, 0.01, 0.0201},         // beyond the x-max end, beside the top face
+      {0.05, -0.003, 0.0201},        // beyond the y-min side
+      {-0.01, -0.01, 0.0201},        // beyond a corner
+      {0.05, 0.01, 0.02 - 2e-3},     // deeper than max_penetration (and far from sides)
+      {0.05, 0.01, 0.02 - 2e-4},     // penetrating within max_penetration -> contact
+  };
+  const Points tool = ToPoints(q);
+  ContactDetector detector(fem::BoundaryTriangles(mesh), mesh.nodes_m, Iota(tool.rows()));
+  std::vector<ContactPoint> contacts;
+  detector.Detect(mesh.nodes_m, tool, params, &contacts);
+  ASSERT_EQ(contacts.size(), 1u);
+  EXPECT_EQ(contacts[0].tool_node, 6);
+  EXPECT_NEAR(contacts[0].gap_m, -2e-4, kTight);
+  EXPECT_LT((contacts[0].frame.row(0).transpose() - Eigen::Vector3d::UnitZ()).norm(), kTight);
+}
+
+TEST_P(FlatBoxTest, SlidingNodeHasOneContactPerStepAcrossEdges) {
+  const auto spec = ObstacleSpec(GetParam(), {20, 4, 4});
+  const fem::Mesh mesh = fem::MakeBoxMesh(spec);
+  const double h = 1e-4;
+  // y = 0.005 is a grid line and the steps hit every grid vertex: the node runs along shared
+  // edges and through shared vertices. y = 0.0123 crosses edges and diagonals in between.
+  for (double y : {0.005, 0.0123}) {
+    std::vector<Eigen::Vector3d> q;
+    for (int k = 0; k <= 400; ++k) q.emplace_back(0.00025 * k, y, 0.02 + h);
+    const Points tool = ToPoints(q);
+    ContactDetector detector(fem::BoundaryTriangles(mesh), mesh.nodes_m, Iota(tool.rows()));
+    std::vector<ContactPoint> contacts;
+    detector.Detect(mesh.nodes_m, tool, CollisionParameters{}, &contacts);
+    // One contact per node (no duplicates, none lost on edges, vertices or the box ends).
+    ASSERT_EQ(contacts.size(), q.size()) << "y = " << y;
+    std::set<int> triangles;
+    int changes = 0;
+    for (std::size_t k = 0; k < contacts.size(); ++k) {
+      EXPECT_EQ(contacts[k].tool_node, static_cast<int>(k));
+      EXPECT_NEAR(contacts[k].gap_m, h, kTight);
+      EXPECT_LT((contacts[k].obstacle_point_m - Eigen::Vector3d(q[k].x(), y, 0.02)).norm(), kTight);
+      ExpectWellFormed(contacts[k], mesh.nodes_m, tool);
+      triangles.insert(contacts[k].obstacle_triangle);
+      if (k > 0) {
+        EXPECT_NEAR(contacts[k].gap_m, contacts[k - 1].gap_m, kTight);  // continuous
+        if (contacts[k].obstacle_triangle != contacts[k - 1].obstacle_triangle) ++changes;
+      }
+    }
+    // 20 cells along x, each top cell is two triangles: at least 20 faces visited.
+    EXPECT_GE(static_cast<int>(triangles.size()), 20) << "y = " << y;
+    EXPECT_GE(changes, 19) << "y = " << y;
+    // The same query again gives the same faces (deterministic tie-break).
+    std::vector<ContactPoint> again;
+    detector.Detect(mesh.nodes_m, tool, CollisionParameters{}, &again);
+    ASSERT_EQ(again.size(), contacts.size());
+    for (std::size_t k = 0; k < again.size(); ++k) {
+      EXPECT_EQ(again[k].obstacle_triangle, contacts[k].obstacle_triangle);
+    }
+  }
+}
+
+std::string OrderName(const ::testing::TestParamInfo<fem::ElementOrder>& param_info) {
+  return fem::ToString(param_info.param);
+}
+
+TEST_P(FlatBoxTest, NodesOnSharedEdgesAndVerticesGoToTheLowestTriangle) {
+  const auto spec = ObstacleSpec(GetParam(), {6, 3, 2});
+  const fem::Mesh mesh = fem::MakeBoxMesh(spec);
+  const auto tris = fem::BoundaryTriangles(mesh);
+  // Every top-face node (shared vertices, and for Tet10 the midsides of shared edges),
+  // lifted by h. The faces holding a node are exactly the top faces that reference it.
+  const std::vector<int> top = fem::NodesOnBoxFace(mesh, spec, fem::BoxFace::kZMax);
+  const double h = 1e-4;
+  Points tool(static_cast<Eigen::Index>(top.size()), 3);
+  std::vector<int> expected;
+  for (std::size_t i = 0; i < top.size(); ++i) {
+    tool.row(static_cast<Eigen::Index>(i)) = mesh.nodes_m.row(top[i]);
+    tool(static_cast<Eigen::Index>(i), 2) += h;
+    int lowest = -1;
+    for (int t = static_cast<int>(tris.size()) - 1; t >= 0; --t) {
+      const auto& tri = tris[static_cast<std::size_t>(t)];
+      bool on_top = true;
+      for (int c : tri.corners) on_top = on_top && std::abs(mesh.nodes_m(c, 2) - 0.02) < 1e-12;
+      const bool references =
+          std::count(tri.corners.begin(), tri.corners.end(), top[i]) > 0 ||
+          std::count(tri.midsides.begin(), tri.midsides.end(), top[i]) > 0;
+      if (on_top && references) lowest = t;
+    }
+    ASSERT_GE(lowest, 0);
+    expected.push_back(lowest);
+  }
+  ContactDetector detector(tris, mesh.nodes_m, Iota(tool.rows()));
+  std::vector<ContactPoint> tree, brute;
+  detector.Detect(mesh.nodes_m, tool, CollisionParameters{}, &tree);
+  detector.DetectBruteForce(mesh.nodes_m, tool, CollisionParameters{}, &brute);
+  ASSERT_EQ(tree.size(), top.size());
+  ASSERT_EQ(brute.size(), top.size());
+  for (std::size_t i = 0; i < top.size(); ++i) {
+    EXPECT_EQ(tree[i].obstacle_triangle, expected[i]) << "node " << top[i];
+    EXPECT_EQ(brute[i].obstacle_triangle, expected[i]) << "node " << top[i];
+    EXPECT_NEAR(tree[i].gap_m, h, kTight);
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(Orders, FlatBoxTest,
+                         ::testing::Values(fem::ElementOrder::kTet4, fem::ElementOrder::kTet10),
+                         OrderName);
+
+// Independent brute force: plane projection by least squares, nearest |gap|.
+struct Reference {
+  bool found = false;
+  double gap_m = 0.0;
+  Eigen::Vector3d point_m = Eigen::Vector3d::Zero();
+  Eigen::Vector3d normal = Eigen::Vector3d::Zero();
+  bool unique = true;  // the runner-up |gap| is clearly larger
+};
+
+Reference ReferenceSearch(const std::vector<fem::SurfaceTriangle>& tris, const Points& obstacle,
+                          const Eigen::Vector3d& x, const CollisionParameters& p) {
+  Reference best;
+  double runner_up = std::numeric_limits<double>::infinity();
+  for (const auto& t : tris) {
+    const Eigen::Vector3d a = obstacle.row(t.corners[0]).transpose();
+    const Eigen::Vector3d b = obstacle.row(t.corners[1]).transpose();
+    const Eigen::Vector3d c = obstacle.row(t.corners[2]).transpose();
+    Eigen::Matrix<double, 3, 2> m;
+    m << b - a, c - a;
+    const Eigen::Vector2d st = m.colPivHouseholderQr().solve(x - a);
+    const double u = 1.0 - st.sum();
+    if (std::min({u, st[0], st[1]}) < -p.edge_tolerance) continue;
+    const Eigen::Vector3d n = (b - a).cross(c - a).normalized();
+    const double g = (x - a).dot(n);
+    if (!(g < p.activation_gap_m && g >= -p.max_penetration_m)) continue;
+    if (!best.found || std::abs(g) < std::abs(best.gap_m)) {
+      if (best.found) runner_up = std::abs(best.gap_m);
+      best.found = true;
+      best.gap_m = g;
+      best.point_m = a + m * st;
+      best.normal = n;
+    } else {
+      runner_up = std::min(runner_up, std::abs(g));
+    }
+  }
+  best.unique = runner_up > std::abs(best.gap_m) + 1e-9;
+  return best;
+}
+
+// Smooth field that keeps the mesh valid: the top sags by up to `amplitude_m`, the bottom
+// stays put.
+Points Sagged(const fem::Mesh& mesh, double amplitude_m) {
+  Points x = mesh.nodes_m;
+  for (Eigen::Index i = 0; i < x.rows(); ++i) {
+    const double s = std::sin(std::numbers::pi * x(i, 0) / 0.10);
+    x(i, 2) -= amplitude_m * s * (x(i, 2) / 0.02);
+  }
+  return x;
+}
+
+TEST(ContactDetectorTest, TreeMatchesBruteForceOnRandomPoints) {
+  const fem::Mesh mesh = fem::MakeBoxMesh(ObstacleSpec(fem::ElementOrder::kTet10, {20, 4, 4}));
+  const auto tris = fem::BoundaryTriangles(mesh);
+  std::mt19937 rng(12345);
+  // Points all around the box, within a few mm of its surface.
+  std::uniform_real_distribution<double> ux(-0.003, 0.103), uy(-0.003, 0.023),
+      uz(-0.003, 0.023);
+  std::vector<Eigen::Vector3d> q;
+  for (int i = 0; i < 3000; ++i) q.emplace_back(ux(rng), uy(rng), uz(rng));
+  const Points tool = ToPoints(q);
+  CollisionParameters params;
+  params.activation_gap_m = 2e-3;
+  params.max_penetration_m = 2e-3;
+  ContactDetector detector(tris, mesh.nodes_m, Iota(tool.rows()));
+  for (double sag_m : {0.0, 1e-3}) {
+    const Points obstacle = Sagged(mesh, sag_m);
+    std::vector<ContactPoint> tree, brute;
+    detector.Detect(obstacle, tool, params, &tree);
+    const DetectorStats tree_stats = detector.last_stats();
+    detector.DetectBruteForce(obstacle, tool, params, &brute);
+    ASSERT_EQ(tree.size(), brute.size());
+    EXPECT_GT(tree.size(), 500u);  // the comparison covers many contacts
+    for (std::size_t i = 0; i < tree.size(); ++i) {
+      EXPECT_EQ(tree[i].tool_node, brute[i].tool_node);
+      EXPECT_EQ(tree[i].obstacle_triangle, brute[i].obstacle_triangle);
+      EXPECT_EQ(tree[i].gap_m, brute[i].gap_m);
+    }
+    EXPECT_LT(tree_stats.triangles_tested, detector.last_stats().triangles_tested / 20);
+
+    // Against the independent search.
+    std::size_t next = 0;
+    int unique = 0;
+    for (int i = 0; i < tool.rows(); ++i) {
+      const Reference ref = ReferenceSearch(tris, obstacle, q[static_cast<std::size_t>(i)], params);
+      const bool found = next < tree.size() && tree[next].tool_node == i;
+      ASSERT_EQ(found, ref.found) << "point " << i;
+      if (!found) continue;
+      const ContactPoint& c = tree[next++];
+      EXPECT_NEAR(c.gap_m, ref.gap_m, 1e-12) << "point " << i;
+      if (ref.unique) {
+        ++unique;
+        EXPECT_LT((c.obstacle_point_m - ref.point_m).norm(), 1e-10) << "point " << i;
+        EXPECT_LT((c.frame.row(0).transpose() - ref.normal).norm(), 1e-12) << "point " << i;
+      }
+      ExpectWellFormed(c, obstacle, tool);
+    }
+    EXPECT_GT(unique, 400);
+  }
+}
+
+TEST(ContactDetectorTest, TiltedObstacleGivesExactPlaneGap) {
+  // A linear field keeps the faces flat: the top becomes the plane z = 0.02 + α x exactly.
+  const fem::Mesh mesh = fem::MakeBoxMesh(ObstacleSpec(fem::ElementOrder::kTet10));
+  const double alpha = 0.05;
+  Points obstacle = mesh.nodes_m;
+  for (Eigen::Index i = 0; i < obstacle.rows(); ++i) {
+    obstacle(i, 2) += alpha * obstacle(i, 0) * obstacle(i, 2) / 0.02;
+  }
+  std::vector<Eigen::Vector3d> q;
+  const double h = 3e-4;  // vertical offset above the tilted top
+  for (int i = 1; i < 40; ++i) q.emplace_back(0.0025 * i, 0.0071, 0.02 + alpha * 0.0025 * i + h);
+  const Points tool = ToPoints(q);
+  ContactDetector detector(fem::BoundaryTriangles(mesh), mesh.nodes_m, Iota(tool.rows()));
+  std::vector<ContactPoint> contacts;
+  detector.Detect(obstacle, tool, CollisionParameters{}, &contacts);
+  ASSERT_EQ(contacts.size(), q.size());
+  const Eigen::Vector3d n = Eigen::Vector3d(-alpha, 0.0, 1.0).normalized();
+  for (const auto& c : contacts) {
+    EXPECT_NEAR(c.gap_m, h / std::sqrt(1.0 + alpha * alpha), kTight);
+    EXPECT_LT((c.frame.row(0).transpose() - n).norm(), kTight);
+    ExpectWellFormed(c, obstacle, tool);
+    ExpectWeightsReproducePoint(c, obstacle);  // midsides moved linearly: still midpoints
+  }
+}
+
+TEST(ContactDetectorTest, GapsFollowSaggedSurface) {
+  const fem::Mesh mesh = fem::MakeBoxMesh(ObstacleSpec(fem::ElementOrder::kTet10, {20, 4, 4}));
+  const double amplitude_m = 1e-3;
+  const Points obstacle = Sagged(mesh, amplitude_m);
+  // Points h above the sagged surface z(x) = 0.02 − A sin(π x / L): the gap is h cos(slope)
+  // up to the flat-facet error A (π/L)² Δx² / 8 ≈ 3e-6 m (Δx = 5 mm).
+  const double h = 2e-4;
+  std::vector<Eigen::Vector3d> q;
+  std::vector<double> expected;
+  for (int i = 1; i < 100; ++i) {
+    const double x = 0.001 * i + 0.0003;
+    const double k = std::numbers::pi / 0.10;
+    const double slope = -amplitude_m * k * std::cos(k * x);
+    q.emplace_back(x, 0.0093, 0.02 - amplitude_m * std::sin(k * x) + h);
+    expected.push_back(h / std::sqrt(1.0 + slope * slope));
+  }
+  const Points tool = ToPoints(q);
+  ContactDetector detector(fem::BoundaryTriangles(mesh), mesh.nodes_m, Iota(tool.rows()));
+  std::vector<ContactPoint> contacts;
+  detector.Detect(obstacle, tool, CollisionParameters{}, &contacts);
+  ASSERT_EQ(contacts.size(), q.size());
+  for (std::size_t i = 0; i < contacts.size(); ++i) {
+    EXPECT_NEAR(contacts[i].gap_m, expected[i], 5e-6) << "x = " << q[i].x();
+    EXPECT_GT(contacts[i].frame(0, 2), 0.999);
+    ExpectWellFormed(contacts[i], obstacle, tool);
+  }
+  // Against the undeformed (flat) obstacle the same points sit h − A sin(π x / L) above the
+  // top: the detector really used the deformed positions above.
+  std::vector<ContactPoint> flat;
+  detector.Detect(mesh.nodes_m, tool, CollisionParameters{}, &flat);
+  ASSERT_EQ(flat.size(), q.size());
+  for (std::size_t i = 0; i < flat.size(); ++i) {
+    EXPECT_NEAR(flat[i].gap_m, q[i].z() - 0.02, kTight);
+  }
+}
+
+struct PaperScene {
+  fem::BoxMeshSpec obstacle_spec;
+  fem::BoxMeshSpec tool_spec;
+  fem::Mesh obstacle;
+  fem::Mesh tool;
+  std::vector<int> candidates;
+};
+
+PaperScene MakePaperScene() {
+  PaperScene s;
+  s.obstacle_spec.size_m = Eigen::Vector3d(0.10, 0.02, 0.02);
+  s.obstacle_spec.divisions = Eigen::Vector3i(20, 4, 4);
+  s.obstacle_spec.order = fem::ElementOrder::kTet10;
+  s.tool_spec.min_corner_m = Eigen::Vector3d(0.04, 0.0, 0.02);
+  s.tool_spec.size_m = Eigen::Vector3d(0.02, 0.02, 0.01);
+  s.tool_spec.divisions = Eigen::Vector3i(4, 4, 2);
+  s.tool_spec.order = fem::ElementOrder::kTet10;
+  s.obstacle = fem::MakeBoxMesh(s.obstacle_spec);
+  s.tool = fem::MakeBoxMesh(s.tool_spec);
+  s.candidates = fem::NodesOnBoxFace(s.tool, s.tool_spec, fem::BoxFace::kZMin);
+  return s;
+}
+
+TEST(ContactDetectorTest, PaperSceneRestPressAndSlideOff) {
+  const PaperScene s = MakePaperScene();
+  ASSERT_EQ(s.candidates.size(), 81u);  // 9 x 9 corner and midside nodes on a 4 x 4 face
+  const auto normals =
+      CandidateNodeNormals(s.tool, fem::BoundaryTriangles(s.tool), s.candidates);
+  ContactDetector detector(fem::BoundaryTriangles(s.obstacle), s.obstacle.nodes_m,
+                           s.candidates, normals);
+  const CollisionParameters params;  // activation 0.5 mm as in the paper scene
+  std::vector<ContactPoint> contacts;
+  contacts.reserve(s.candidates.size());
+
+  const auto moved = [&](const Eigen::Vector3d& d) {
+    Points x = s.tool.nodes_m;
+    x.rowwise() += d.transpose();
+    return x;
+  };
+  // At rest: every candidate touches with zero gap, n = +z, also the rim nodes lying on the
+  // obstacle's top edges at y = 0 and y = 0.02 (the normal check keeps them off the sides).
+  {
+    const Points tool = moved(Eigen::Vector3d::Zero());
+    detector.Detect(s.obstacle.nodes_m, tool, params, &contacts);
+    ASSERT_EQ(contacts.size(), s.candidates.size());
+    for (std::size_t i = 0; i < contacts.size(); ++i) {
+      EXPECT_EQ(contacts[i].tool_node, s.candidates[i]);
+      EXPECT_NEAR(contacts[i].gap_m, 0.0, kTight);
+      EXPECT_LT((contacts[i].frame.row(0).transpose() - Eigen::Vector3d::UnitZ()).norm(), kTight);
+      ExpectWellFormed(contacts[i], s.obstacle.nodes_m, tool);
+      ExpectWeightsReproducePoint(contacts[i], s.obstacle.nodes_m);
+    }
+  }
+  // Pressed 0.1 mm: all penetrate by 0.1 mm, still on the top face.
+  {
+    const Points tool = moved(Eigen::Vector3d(0.0, 0.0, -1e-4));
+    detector.Detect(s.obstacle.nodes_m, tool, params, &contacts);
+    ASSERT_EQ(contacts.size(), s.candidates.size());
+    for (const auto& c : contacts) {
+      EXPECT_NEAR(c.gap_m, -1e-4, kTight);
+      EXPECT_LT((c.frame.row(0).transpose() - Eigen::Vector3d::UnitZ()).norm(), kTight);
+    }
+  }
+  // Slid 5 mm along +y: nodes past the obstacle's y-max edge lose contact; the row that
+  // lands exactly on the edge keeps it.
+  {
+    const Points tool = moved(Eigen::Vector3d(0.0, 0.005, 0.0));
+    detector.Detect(s.obstacle.nodes_m, tool, params, &contacts);
+    std::set<int> in_contact;
+    for (const auto& c : contacts) {
+      EXPECT_TRUE(in_contact.insert(c.tool_node).second) << "duplicate contact";
+      EXPECT_NEAR(c.gap_m, 0.0, kTight);
+    }
+    int off = 0;
+    for (int id : s.candidates) {
+      const double y = tool(id, 1);
+      if (y > 0.02 + 1e-9) {
+        ++off;
+        EXPECT_EQ(in_contact.count(id), 0u) << "node " << id << " at y = " << y;
+      } else {
+        EXPECT_EQ(in_contact.count(id), 1u) << "node " << id << " at y = " << y;
+      }
+    }
+    EXPECT_EQ(off, 18);  // two rows of 9 nodes at y = 0.0225 and 0.025
+  }
+}
+
+TEST(ContactDetectorTest, CandidateNodeNormalsOfBottomFaceAreMinusZ) {
+  const PaperScene s = MakePaperScene();
+  const auto normals =
+      CandidateNodeNormals(s.tool, fem::BoundaryTriangles(s.tool), s.candidates);
+  ASSERT_EQ(normals.size(), s.candidates.size());
+  for (const auto& n : normals) EXPECT_LT((n + Eigen::Vector3d::UnitZ()).norm(), kTight);
+}
+
+TEST(ContactDetectorTest, TrianglesTestedPerQueryStaySmallOnBigMesh) {
+  fem::BoxMeshSpec spec;
+  spec.size_m = Eigen::Vector3d(1.0, 1.0, 0.02);
+  spec.divisions = Eigen::Vector3i(100, 100, 2);
+  spec.order = fem::ElementOrder::kTet4;
+  const fem::Mesh mesh = fem::MakeBoxMesh(spec);
+  const auto tris = fem::BoundaryTriangles(mesh);
+  std::mt19937 rng(99);
+  std::uniform_real_distribution<double> u(0.0, 1.0), uh(-2e-4, 4e-4);
+  std::vector<Eigen::Vector3d> q;
+  for (int i = 0; i < 2000; ++i) q.emplace_back(u(rng), u(rng), 0.02 + uh(rng));
+  const Points tool = ToPoints(q);
+  ContactDetector detector(tris, mesh.nodes_m, Iota(tool.rows()));
+  std::vector<ContactPoint> contacts;
+  detector.Detect(mesh.nodes_m, tool, CollisionParameters{}, &contacts);
+  EXPECT_EQ(contacts.size(), q.size());
+  const DetectorStats& st = detector.last_stats();
+  const double tested = static_cast<double>(st.triangles_tested) / static_cast<double>(st.queries);
+  const double visited = static_cast<double>(st.bvh_nodes_visited) / static_cast<double>(st.queries);
+  std::cout << "big mesh: " << st.triangles_total << " triangles, " << detector.bvh_node_count()
+            << " boxes; per query: " << tested << " triangles tested, " << visited
+            << " boxes visited (brute force: " << st.triangles_total << " triangles)\n";
+  EXPECT_LT(tested, 0.01 * static_cast<double>(st.triangles_total));
+  EXPECT_LT(visited, 0.01 * static_cast<double>(detector.bvh_node_count()));
+}
+
+TEST(ContactDetectorTest, DetectIsAllocationFreeOnceWarmedUp) {
+  const PaperScene s = MakePaperScene();
+  ContactDetector detector(
+      fem::BoundaryTriangles(s.obstacle), s.obstacle.nodes_m, s.candidates,
+      CandidateNodeNormals(s.tool, fem::BoundaryTriangles(s.tool), s.candidates));
+  std::vector<ContactPoint> contacts;
+  detector.Detect(s.obstacle.nodes_m, s.tool.nodes_m, CollisionParameters{}, &contacts);
+  ASSERT_FALSE(contacts.empty());
+  Points tool = s.tool.nodes_m;
+  tool.col(2).array() -= 1e-4;
+  g_allocations = 0;
+  g_count_allocations = true;
+  detector.Detect(s.obstacle.nodes_m, tool, CollisionParameters{}, &contacts);
+  g_count_allocations = false;
+  EXPECT_EQ(g_allocations.load(), 0);
+  EXPECT_EQ(contacts.size(), s.candidates.size());
+}
+
+TEST(ContactDetectorTest, RejectsBadInput) {
+  const fem::Mesh mesh = fem::MakeBoxMesh(ObstacleSpec(fem::ElementOrder::kTet4));
+  const auto tris = fem::BoundaryTriangles(mesh);
+  EXPECT_THROW(ContactDetector({}, mesh.nodes_m, {0}), InputError);
+  auto bad = tris;
+  bad[0].corners[1] = mesh.num_nodes();
+  EXPECT_THROW(ContactDetector(bad, mesh.nodes_m, {0}), InputError);
+  bad = tris;
+  bad[0].corners[1] = bad[0].corners[0];
+  EXPECT_THROW(ContactDetector(bad, mesh.nodes_m, {0}), InputError);
+  bad = tris;
+  bad[0].midsides[0] = 0;
+  EXPECT_THROW(ContactDetector(bad, mesh.nodes_m, {0}), InputError);
+  EXPECT_THROW(ContactDetector(tris, mesh.nodes_m, {-1}), InputError);
+  EXPECT_THROW(ContactDetector(tris, mesh.nodes_m, {0, 1}, {Eigen::Vector3d::UnitZ()}),
+               InputError);
+
+  ContactDetector detector(tris, mesh.nodes_m, {0, 5});
+  std::vector<ContactPoint> contacts;
+  const Points tool = Points::Zero(6, 3);
+  EXPECT_THROW(detector.Detect(mesh.nodes_m.topRows(3), tool, {}, &contacts), InputError);
+  EXPECT_THROW(detector.Detect(mesh.nodes_m, tool.topRows(5), {}, &contacts), InputError);
+  CollisionParameters p;
+  p.activation_gap_m = -1.0;
+  EXPECT_THROW(detector.Detect(mesh.nodes_m, tool, p, &contacts), InputError);
+  p = {};
+  p.max_penetration_m = std::nan("");
+  EXPECT_THROW(detector.Detect(mesh.nodes_m, tool, p, &contacts), InputError);
+  p = {};
+  p.edge_tolerance = 0.5;
+  EXPECT_THROW(detector.Detect(mesh.nodes_m, tool, p, &contacts), InputError);
+}
+
+}  // namespace
+}  // namespace hapco::sim
