@@ -1,0 +1,143 @@
+// hapco-scene: load a scene file, mesh and factor its bodies once, and print what a user
+// wants to check before running it (sizes, costs, sanity checks). Thin: the work is in the
+// libraries (design.md, example 14).
+#include <cstdio>
+#include <cstring>
+#include <string>
+#include <vector>
+
+#include "common/error.h"
+#include "common/memory.h"
+#include "common/timer.h"
+#include "fem/box_mesh.h"
+#include "io/scene_file.h"
+#include "sim/scene.h"
+
+namespace {
+
+constexpr const char* kUsage = R"(usage: hapco-scene SCENE.txtpb [--no-compliance]
+
+Loads a HapCo scene file (proto/scene.proto), meshes both bodies, assembles and factors their
+stiffness once (CHOLMOD), computes the compliance blocks of the candidate contact surfaces
+(obstacle top face, tool bottom face) and prints sizes, costs and sanity checks.
+
+  --no-compliance   skip the compliance blocks (faster on very fine meshes)
+  --help            this text
+
+Exit code: 0 on success, 1 on a bad scene (one line on stderr names file, line and field).
+)";
+
+const char* FaceName(hapco::fem::BoxFace face) {
+  static const char* names[] = {"X_MIN", "X_MAX", "Y_MIN", "Y_MAX", "Z_MIN", "Z_MAX"};
+  return names[static_cast<int>(face)];
+}
+
+std::string Faces(const hapco::sim::BodySpec& body) {
+  std::string text;
+  for (hapco::fem::BoxFace face : body.clamped_faces) text += std::string(" ") + FaceName(face);
+  return text.empty() ? " none" : text;
+}
+
+void PrintBody(const char* role, const hapco::sim::BodySpec& spec,
+               const hapco::fem::ElasticBody& body) {
+  const auto& box = spec.box;
+  const auto& stats = body.stats();
+  std::printf("%-9s %s: box %.4g x %.4g x %.4g m, %s, %d x %d x %d cells\n", role,
+              spec.name.c_str(), box.size_m.x(), box.size_m.y(), box.size_m.z(),
+              hapco::fem::ToString(box.order), box.divisions.x(), box.divisions.y(),
+              box.divisions.z());
+  std::printf("          %d nodes, %d elements, %d dofs (%d free); E = %.4g MPa, nu = %.3g\n",
+              body.mesh().num_nodes(), body.mesh().num_elements(), body.num_dofs(),
+              body.num_free_dofs(), spec.material.youngs_modulus_pa * 1e-6,
+              spec.material.poisson_ratio);
+  std::printf("          clamped faces:%s; driven face: %s (%zu clamped, %zu driven nodes)\n",
+              Faces(spec).c_str(), spec.driven_face ? FaceName(*spec.driven_face) : "none",
+              body.clamped_nodes().size(), body.driven_nodes().size());
+  std::printf("          K nonzeros %ld, Cholesky factor nonzeros %ld; assembly %.3f s, "
+              "factorization %.3f s\n",
+              stats.stiffness_nonzeros, stats.factor_nonzeros, stats.assembly_seconds,
+              stats.factorization_seconds);
+}
+
+int Run(int argc, char** argv) {
+  std::string scene_path;
+  bool compliance = true;
+  for (int i = 1; i < argc; ++i) {
+    if (!std::strcmp(argv[i], "--help") || !std::strcmp(argv[i], "-h")) {
+      std::fputs(kUsage, stdout);
+      return 0;
+    } else if (!std::strcmp(argv[i], "--no-compliance")) {
+      compliance = false;
+    } else if (argv[i][0] == '-') {
+      throw hapco::InputError(std::string("unknown option ") + argv[i] + " (see --help)");
+    } else if (scene_path.empty()) {
+      scene_path = argv[i];
+    } else {
+      throw hapco::InputError("only one scene file is accepted (see --help)");
+    }
+  }
+  if (scene_path.empty()) throw hapco::InputError("missing SCENE argument (see --help)");
+
+  hapco::Stopwatch total;
+  const hapco::sim::SceneSpec scene = hapco::io::LoadSceneFile(scene_path);
+  std::printf("scene     %s: %s\n", scene.name.c_str(), scene.description.c_str());
+  const hapco::fem::ElasticBody obstacle = hapco::sim::BuildBody(scene.obstacle);
+  const hapco::fem::ElasticBody tool = hapco::sim::BuildBody(scene.tool);
+  PrintBody("obstacle", scene.obstacle, obstacle);
+  PrintBody("tool", scene.tool, tool);
+
+  // Sanity check: a rigid translation of the tool (no contact) must cost no force.
+  const Eigen::Vector3d translation_m(1e-3, -2e-3, 3e-3);
+  const Eigen::VectorXd no_load = Eigen::VectorXd::Zero(tool.num_dofs());
+  const Eigen::VectorXd rigid = tool.SolveDisplacement(no_load, translation_m);
+  const double rigid_force_n = tool.ReactionForce(rigid, no_load, tool.driven_nodes()).norm();
+  std::printf("check     rigid 3.7 mm translation of the free tool: reaction %.2e N "
+              "(0 expected)\n", rigid_force_n);
+
+  if (compliance) {
+    const std::vector<int> obstacle_nodes =
+        hapco::fem::NodesOnBoxFace(obstacle.mesh(), scene.obstacle.box, hapco::fem::BoxFace::kZMax);
+    const std::vector<int> tool_nodes =
+        hapco::fem::NodesOnBoxFace(tool.mesh(), scene.tool.box, hapco::fem::BoxFace::kZMin);
+    hapco::Stopwatch watch;
+    const Eigen::MatrixXd obstacle_compliance = obstacle.ComplianceBlock(obstacle_nodes);
+    const double obstacle_seconds = watch.ElapsedSeconds();
+    watch.Restart();
+    const Eigen::MatrixXd tool_compliance = tool.ComplianceBlock(tool_nodes);
+    const double tool_seconds = watch.ElapsedSeconds();
+    std::printf("contact   candidate surfaces: obstacle top %zu nodes, tool bottom %zu nodes\n",
+                obstacle_nodes.size(), tool_nodes.size());
+    std::printf("          compliance blocks %ldx%ld in %.3f s and %ldx%ld in %.3f s; "
+                "largest obstacle entry %.3g m/N\n",
+                obstacle_compliance.rows(), obstacle_compliance.cols(), obstacle_seconds,
+                tool_compliance.rows(), tool_compliance.cols(), tool_seconds,
+                obstacle_compliance.diagonal().maxCoeff());
+  }
+  std::printf("contact   mu = %.3g, activation gap %.3g mm; solver %s, tolerance %.3g m\n",
+              scene.friction_coefficient, scene.activation_gap_m * 1e3,
+              std::string(hapco::contact::SolverName(scene.solver)).c_str(),
+              scene.solver_parameters.global_tolerance_m);
+  std::printf("trajectory %d steps:", scene.total_steps());
+  for (const auto& phase : scene.trajectory) {
+    std::printf(" %s (%d, %+.1f/%+.1f/%+.1f mm)", phase.name.c_str(), phase.steps,
+                phase.displacement_m.x() * 1e3, phase.displacement_m.y() * 1e3,
+                phase.displacement_m.z() * 1e3);
+  }
+  std::printf("\nmemory    peak resident %.1f MiB; total %.2f s\n",
+              static_cast<double>(hapco::PeakResidentBytes()) / (1 << 20), total.ElapsedSeconds());
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  try {
+    return Run(argc, argv);
+  } catch (const hapco::InputError& error) {
+    std::fprintf(stderr, "hapco-scene: %s\n", error.what());
+    return 1;
+  } catch (const std::exception& error) {
+    std::fprintf(stderr, "hapco-scene: unexpected error: %s\n", error.what());
+    return 3;
+  }
+}

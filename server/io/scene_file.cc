@@ -1,0 +1,295 @@
+#include "io/scene_file.h"
+
+#include <google/protobuf/io/tokenizer.h>
+#include <google/protobuf/text_format.h>
+
+#include <cmath>
+#include <fstream>
+#include <sstream>
+
+#include "common/error.h"
+#include "scene.pb.h"
+
+namespace hapco::io {
+namespace {
+
+namespace pb = ::hapco::scene;
+using google::protobuf::FieldDescriptor;
+using google::protobuf::Message;
+using google::protobuf::TextFormat;
+
+// Collects the first syntax error with its 1-based line and column.
+class FirstErrorCollector : public google::protobuf::io::ErrorCollector {
+ public:
+  void AddError(int line, google::protobuf::io::ColumnNumber column,
+                const std::string& message) override {
+    if (!has_error_) {
+      has_error_ = true;
+      message_ = std::to_string(line + 1) + ":" + std::to_string(column + 1) + ": " + message;
+    }
+  }
+  bool has_error() const { return has_error_; }
+  const std::string& message() const { return message_; }
+
+ private:
+  bool has_error_ = false;
+  std::string message_;
+};
+
+// Walks the parsed message and its location tree together so that each check can name the
+// field path and, when the field was written in the file, its line.
+class SceneChecker {
+ public:
+  SceneChecker(std::string source, const TextFormat::ParseInfoTree* tree)
+      : source_(std::move(source)), tree_(tree) {}
+
+  [[noreturn]] void Fail(const std::string& path, const Message& parent,
+                         const TextFormat::ParseInfoTree* tree, const char* field_name,
+                         const std::string& problem, int index = -1) const {
+    std::string where = source_;
+    const FieldDescriptor* field = parent.GetDescriptor()->FindFieldByName(field_name);
+    // A repeated field is located by element; an unset field has no location to report.
+    const bool locatable = field != nullptr && (field->is_repeated() ? index >= 0 : index < 0);
+    if (tree != nullptr && locatable) {
+      const auto location = tree->GetLocation(field, index);
+      if (location.line >= 0) where += ":" + std::to_string(location.line + 1);
+    }
+    const std::string full = path.empty() ? field_name : path + "." + field_name;
+    throw InputError(where + ": " + full + ": " + problem);
+  }
+
+  const TextFormat::ParseInfoTree* Nested(const TextFormat::ParseInfoTree* tree,
+                                          const Message& parent, const char* field_name) const {
+    if (tree == nullptr) return nullptr;
+    const FieldDescriptor* field = parent.GetDescriptor()->FindFieldByName(field_name);
+    return field == nullptr ? nullptr : tree->GetTreeForNested(field, -1);
+  }
+
+  sim::SceneSpec Check(const pb::Scene& scene) const {
+    if (scene.format_version() != static_cast<unsigned>(kSceneFormatVersion)) {
+      Fail("", scene, tree_, "format_version",
+           "is " + std::to_string(scene.format_version()) + ", this HapCo reads version " +
+               std::to_string(kSceneFormatVersion));
+    }
+    sim::SceneSpec spec;
+    spec.name = scene.name().empty() ? "unnamed" : scene.name();
+    spec.description = scene.description();
+    if (!scene.has_obstacle()) Fail("", scene, tree_, "obstacle", "is missing");
+    if (!scene.has_tool()) Fail("", scene, tree_, "tool", "is missing");
+    spec.obstacle = CheckBody("obstacle", scene.obstacle(), Nested(tree_, scene, "obstacle"));
+    spec.tool = CheckBody("tool", scene.tool(), Nested(tree_, scene, "tool"));
+    if (!spec.tool.driven_face) {
+      Fail("tool", scene.tool(), Nested(tree_, scene, "tool"), "driven_face",
+           "is missing: the tool must have a face that follows the haptic device");
+    }
+    CheckContact(scene, &spec);
+    CheckSolver(scene, &spec);
+    CheckTrajectory(scene, &spec);
+    if (!(scene.force_gain() > 0.0) || !std::isfinite(scene.force_gain())) {
+      Fail("", scene, tree_, "force_gain",
+           "must be a finite number > 0 (device force = gain x reaction), got " +
+               Number(scene.force_gain()));
+    }
+    spec.force_gain = scene.force_gain();
+    return spec;
+  }
+
+ private:
+  static std::string Number(double value) {
+    std::ostringstream out;
+    out << value;
+    return out.str();
+  }
+
+  static fem::BoxFace ToFace(pb::BoxFace face) {
+    switch (face) {
+      case pb::X_MIN: return fem::BoxFace::kXMin;
+      case pb::X_MAX: return fem::BoxFace::kXMax;
+      case pb::Y_MIN: return fem::BoxFace::kYMin;
+      case pb::Y_MAX: return fem::BoxFace::kYMax;
+      case pb::Z_MIN: return fem::BoxFace::kZMin;
+      case pb::Z_MAX: return fem::BoxFace::kZMax;
+      default: break;
+    }
+    HAPCO_ASSERT(false, "unspecified face passed the checks");
+  }
+
+  sim::BodySpec CheckBody(const std::string& path, const pb::Body& body,
+                          const TextFormat::ParseInfoTree* tree) const {
+    sim::BodySpec spec;
+    spec.name = body.name().empty() ? path : body.name();
+    if (body.geometry_case() == pb::Body::kMeshFile) {
+      Fail(path, body, tree, "mesh_file",
+           "imported meshes are not supported yet; describe the body with `box { ... }`");
+    }
+    if (!body.has_box()) Fail(path, body, tree, "box", "is missing (the body's geometry)");
+    const pb::BoxGeometry& box = body.box();
+    const auto* box_tree = Nested(tree, body, "box");
+    const std::string box_path = path + ".box";
+    const Eigen::Vector3d size(box.size_m().x(), box.size_m().y(), box.size_m().z());
+    if (!box.has_size_m() || !(size.minCoeff() > 0.0) || !size.allFinite()) {
+      Fail(box_path, box, box_tree, "size_m",
+           "every edge length must be a finite number > 0 m, got (" + Number(size.x()) + ", " +
+               Number(size.y()) + ", " + Number(size.z()) + ")");
+    }
+    const Eigen::Vector3d corner(box.min_corner_m().x(), box.min_corner_m().y(),
+                                 box.min_corner_m().z());
+    if (!corner.allFinite()) {
+      Fail(box_path, box, box_tree, "min_corner_m", "must be finite");
+    }
+    const char* division_fields[3] = {"divisions_x", "divisions_y", "divisions_z"};
+    const unsigned divisions[3] = {box.divisions_x(), box.divisions_y(), box.divisions_z()};
+    for (int axis = 0; axis < 3; ++axis) {
+      if (divisions[axis] < 1 || divisions[axis] > 400) {
+        Fail(box_path, box, box_tree, division_fields[axis],
+             "must be between 1 and 400 cells, got " + std::to_string(divisions[axis]));
+      }
+    }
+    spec.box.min_corner_m = corner;
+    spec.box.size_m = size;
+    spec.box.divisions = Eigen::Vector3i(static_cast<int>(divisions[0]),
+                                         static_cast<int>(divisions[1]),
+                                         static_cast<int>(divisions[2]));
+    switch (body.element_order()) {
+      case pb::TET4: spec.box.order = fem::ElementOrder::kTet4; break;
+      case pb::TET10: spec.box.order = fem::ElementOrder::kTet10; break;
+      default:
+        Fail(path, body, tree, "element_order", "must be TET4 or TET10");
+    }
+    if (!body.has_material()) Fail(path, body, tree, "material", "is missing");
+    const pb::Material& material = body.material();
+    const auto* material_tree = Nested(tree, body, "material");
+    const std::string material_path = path + ".material";
+    if (!(material.youngs_modulus_pa() > 0.0) || !std::isfinite(material.youngs_modulus_pa())) {
+      Fail(material_path, material, material_tree, "youngs_modulus_pa",
+           "must be a finite number > 0 Pa, got " + Number(material.youngs_modulus_pa()));
+    }
+    if (!(material.poisson_ratio() > -1.0 && material.poisson_ratio() < 0.5)) {
+      Fail(material_path, material, material_tree, "poisson_ratio",
+           "must lie in (-1, 0.5) for a stable isotropic material, got " +
+               Number(material.poisson_ratio()));
+    }
+    spec.material = {material.youngs_modulus_pa(), material.poisson_ratio()};
+    for (int index = 0; index < body.clamped_faces_size(); ++index) {
+      if (body.clamped_faces(index) == pb::BOX_FACE_UNSPECIFIED) {
+        Fail(path, body, tree, "clamped_faces", "must name a face (X_MIN ... Z_MAX)", index);
+      }
+      spec.clamped_faces.push_back(ToFace(body.clamped_faces(index)));
+    }
+    if (body.driven_face() != pb::BOX_FACE_UNSPECIFIED) {
+      spec.driven_face = ToFace(body.driven_face());
+    }
+    if (spec.clamped_faces.empty() && !spec.driven_face) {
+      Fail(path, body, tree, "clamped_faces",
+           "the body has no clamped and no driven face: its stiffness is singular (it can move "
+           "freely); add `clamped_faces: X_MIN` or a `driven_face`");
+    }
+    return spec;
+  }
+
+  void CheckContact(const pb::Scene& scene, sim::SceneSpec* spec) const {
+    const pb::Contact& contact = scene.contact();
+    const auto* tree = Nested(tree_, scene, "contact");
+    if (!(contact.friction_coefficient() >= 0.0) || contact.friction_coefficient() > 10.0) {
+      Fail("contact", contact, tree, "friction_coefficient",
+           "must be in [0, 10], got " + Number(contact.friction_coefficient()));
+    }
+    if (!(contact.activation_gap_m() > 0.0) || !std::isfinite(contact.activation_gap_m())) {
+      Fail("contact", contact, tree, "activation_gap_m",
+           "must be a finite distance > 0 m, got " + Number(contact.activation_gap_m()));
+    }
+    spec->friction_coefficient = contact.friction_coefficient();
+    spec->activation_gap_m = contact.activation_gap_m();
+  }
+
+  void CheckSolver(const pb::Scene& scene, sim::SceneSpec* spec) const {
+    const pb::SolverSettings& solver = scene.solver();
+    const auto* tree = Nested(tree_, scene, "solver");
+    switch (solver.solver()) {
+      case pb::LOCAL_UZAWA: spec->solver = contact::SolverKind::kLocalUzawa; break;
+      case pb::GLOBAL_UZAWA_GS: spec->solver = contact::SolverKind::kGlobalUzawaGaussSeidel; break;
+      case pb::GLOBAL_UZAWA_JACOBI: spec->solver = contact::SolverKind::kGlobalUzawaJacobi; break;
+      case pb::REFERENCE_NSGS: spec->solver = contact::SolverKind::kReferenceNsgs; break;
+      default:
+        Fail("solver", solver, tree, "solver",
+             "must be LOCAL_UZAWA, GLOBAL_UZAWA_GS, GLOBAL_UZAWA_JACOBI or REFERENCE_NSGS");
+    }
+    contact::SolverParameters& parameters = spec->solver_parameters;
+    if (!(solver.global_tolerance_m() > 0.0)) {
+      Fail("solver", solver, tree, "global_tolerance_m",
+           "must be > 0 m (the paper's Uzawa error), got " + Number(solver.global_tolerance_m()));
+    }
+    parameters.global_tolerance_m = solver.global_tolerance_m();
+    if (solver.local_tolerance_m() < 0.0) {
+      Fail("solver", solver, tree, "local_tolerance_m", "must be >= 0 m");
+    }
+    if (solver.local_tolerance_m() > 0.0) parameters.local_tolerance_m = solver.local_tolerance_m();
+    if (solver.max_iterations() < 1 || solver.max_iterations() > 1000000) {
+      Fail("solver", solver, tree, "max_iterations",
+           "must be between 1 and 1000000, got " + std::to_string(solver.max_iterations()));
+    }
+    parameters.max_iterations = static_cast<int>(solver.max_iterations());
+    if (!(solver.time_budget_s() >= 0.0) || !std::isfinite(solver.time_budget_s())) {
+      Fail("solver", solver, tree, "time_budget_s", "must be >= 0 s (0 = no budget)");
+    }
+    parameters.time_budget_s = solver.time_budget_s();
+    parameters.warm_start = solver.warm_start();
+  }
+
+  void CheckTrajectory(const pb::Scene& scene, sim::SceneSpec* spec) const {
+    const pb::Trajectory& trajectory = scene.trajectory();
+    const auto* tree = Nested(tree_, scene, "trajectory");
+    if (trajectory.phases_size() == 0) {
+      Fail("", scene, tree_, "trajectory", "needs at least one phase");
+    }
+    const FieldDescriptor* phases_field =
+        trajectory.GetDescriptor()->FindFieldByName("phases");
+    for (int index = 0; index < trajectory.phases_size(); ++index) {
+      const pb::TrajectoryPhase& phase = trajectory.phases(index);
+      const auto* phase_tree = tree == nullptr ? nullptr : tree->GetTreeForNested(phases_field, index);
+      const std::string path = "trajectory.phases[" + std::to_string(index) + "]";
+      if (phase.steps() < 1 || phase.steps() > 10000000) {
+        Fail(path, phase, phase_tree, "steps",
+             "must be between 1 and 10000000, got " + std::to_string(phase.steps()));
+      }
+      const Eigen::Vector3d displacement(phase.displacement_m().x(), phase.displacement_m().y(),
+                                         phase.displacement_m().z());
+      if (!displacement.allFinite() || displacement.norm() > 1.0) {
+        Fail(path, phase, phase_tree, "displacement_m",
+             "must be finite and at most 1 m long");
+      }
+      spec->trajectory.push_back(
+          {phase.name().empty() ? "phase " + std::to_string(index + 1) : phase.name(),
+           displacement, static_cast<int>(phase.steps())});
+    }
+  }
+
+  std::string source_;
+  const TextFormat::ParseInfoTree* tree_;
+};
+
+}  // namespace
+
+sim::SceneSpec ParseSceneText(const std::string& text, const std::string& source_name) {
+  pb::Scene scene;
+  TextFormat::Parser parser;
+  FirstErrorCollector errors;
+  TextFormat::ParseInfoTree tree;
+  parser.RecordErrorsTo(&errors);
+  parser.WriteLocationsTo(&tree);
+  if (!parser.ParseFromString(text, &scene)) {
+    throw InputError(source_name + ":" +
+                     (errors.has_error() ? errors.message() : std::string(" syntax error")));
+  }
+  return SceneChecker(source_name, &tree).Check(scene);
+}
+
+sim::SceneSpec LoadSceneFile(const std::string& path) {
+  std::ifstream file(path);
+  if (!file) throw InputError(path + ": cannot open scene file");
+  std::stringstream text;
+  text << file.rdbuf();
+  return ParseSceneText(text.str(), path);
+}
+
+}  // namespace hapco::io

@@ -1,0 +1,52 @@
+#pragma once
+// A scene in plain C++ types (no file format): two elastic bodies, contact, solver settings
+// and the device trajectory (algorithms.md §1). io/scene_file.h reads it from a scene file.
+#include <Eigen/Dense>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "contact/solver.h"
+#include "fem/box_mesh.h"
+#include "fem/elastic_body.h"
+
+namespace hapco::sim {
+
+struct BodySpec {
+  std::string name;
+  fem::BoxMeshSpec box;
+  fem::Material material;
+  std::vector<fem::BoxFace> clamped_faces;   // fixed nodes
+  std::optional<fem::BoxFace> driven_face;   // nodes that follow the device translation
+};
+
+// `steps` equal device increments that add up to `displacement_m`.
+struct TrajectoryPhase {
+  std::string name;
+  Eigen::Vector3d displacement_m = Eigen::Vector3d::Zero();
+  int steps = 0;
+};
+
+struct SceneSpec {
+  std::string name;
+  std::string description;
+  BodySpec obstacle;  // the paper's red body
+  BodySpec tool;      // the paper's green body, driven by the device
+  double friction_coefficient = 0.3;  // Coulomb μ, dimensionless
+  double activation_gap_m = 5e-4;     // candidate contacts closer than this are active
+  contact::SolverKind solver = contact::SolverKind::kLocalUzawa;
+  contact::SolverParameters solver_parameters;
+  std::vector<TrajectoryPhase> trajectory;
+  double force_gain = 1.0;  // device force = gain × reaction at the driven nodes
+
+  int total_steps() const;
+  // Device translation (m) after `step` increments (0 = start), following the phases.
+  Eigen::Vector3d DeviceTranslationAtStep(int step) const;
+  // Index of the phase that step `step` (1-based) belongs to.
+  int PhaseOfStep(int step) const;
+};
+
+// Meshes the body's box, gathers its Dirichlet nodes and factors its stiffness (once).
+fem::ElasticBody BuildBody(const BodySpec& body);
+
+}  // namespace hapco::sim

@@ -1,0 +1,170 @@
+// Scene files: the shipped benchmarks load as algorithms.md §1 describes them, and every kind
+// of bad input is rejected with one message that names the field (and line).
+#include "io/scene_file.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <fstream>
+#include <sstream>
+
+#include "common/error.h"
+
+namespace hapco::io {
+namespace {
+
+std::string ReadFile(const std::string& path) {
+  std::ifstream file(path);
+  std::stringstream text;
+  text << file.rdbuf();
+  return text.str();
+}
+
+const std::string kBenchmark1 = std::string(HAPCO_SOURCE_DIR) + "/proto/scenes/benchmark1.txtpb";
+const std::string kBenchmark2 = std::string(HAPCO_SOURCE_DIR) + "/proto/scenes/benchmark2.txtpb";
+
+// Returns the InputError message produced by parsing `text`, or "" if it parsed.
+std::string ErrorOf(const std::string& text) {
+  try {
+    ParseSceneText(text, "scene.txtpb");
+  } catch (const InputError& error) {
+    return error.what();
+  }
+  return "";
+}
+
+// The benchmark 1 text with one substring replaced (must be present exactly once).
+std::string Benchmark1With(const std::string& from, const std::string& to) {
+  std::string text = ReadFile(kBenchmark1);
+  const auto at = text.find(from);
+  EXPECT_NE(at, std::string::npos) << from;
+  EXPECT_EQ(text.find(from, at + 1), std::string::npos) << from << " is not unique";
+  return text.replace(at, from.size(), to);
+}
+
+// 1-based line of the first occurrence of `needle` in the benchmark 1 file.
+int LineOf(const std::string& needle) {
+  const std::string text = ReadFile(kBenchmark1);
+  const auto at = text.find(needle);
+  return 1 + static_cast<int>(std::count(text.begin(), text.begin() + static_cast<long>(at), '\n'));
+}
+
+TEST(SceneFileTest, Benchmark1MatchesThePaperScene) {
+  const sim::SceneSpec scene = LoadSceneFile(kBenchmark1);
+  // Red bar 10 x 2 x 2 cm, E = 3000 kPa, nu = 0.3, clamped at both ends (algorithms.md §1).
+  EXPECT_EQ(scene.obstacle.box.size_m, Eigen::Vector3d(0.10, 0.02, 0.02));
+  EXPECT_DOUBLE_EQ(scene.obstacle.material.youngs_modulus_pa, 3.0e6);
+  EXPECT_DOUBLE_EQ(scene.obstacle.material.poisson_ratio, 0.3);
+  ASSERT_EQ(scene.obstacle.clamped_faces.size(), 2u);
+  EXPECT_FALSE(scene.obstacle.driven_face.has_value());
+  // Green block E = 80000 kPa, driven by its top face, resting on the red top face.
+  EXPECT_DOUBLE_EQ(scene.tool.material.youngs_modulus_pa, 8.0e7);
+  ASSERT_TRUE(scene.tool.driven_face.has_value());
+  EXPECT_EQ(*scene.tool.driven_face, fem::BoxFace::kZMax);
+  EXPECT_DOUBLE_EQ(scene.tool.box.min_corner_m.z(),
+                   scene.obstacle.box.min_corner_m.z() + scene.obstacle.box.size_m.z());
+  // Centred at mid-span.
+  EXPECT_NEAR(scene.tool.box.min_corner_m.x() + scene.tool.box.size_m.x() / 2, 0.05, 1e-12);
+  // Five phases, P = 1 mm: press 3P, +x 10P, +y 5P, -x 10P, lift 3P; 310 steps in all.
+  ASSERT_EQ(scene.trajectory.size(), 5u);
+  EXPECT_EQ(scene.total_steps(), 30 + 100 + 50 + 100 + 30);
+  EXPECT_TRUE(scene.DeviceTranslationAtStep(30).isApprox(Eigen::Vector3d(0, 0, -0.003)));
+  EXPECT_TRUE(scene.DeviceTranslationAtStep(130).isApprox(Eigen::Vector3d(0.010, 0, -0.003)));
+  // After the last phase the device is back at x = 0, lifted to z = 0, shifted by +y 5P.
+  EXPECT_LT((scene.DeviceTranslationAtStep(310) - Eigen::Vector3d(0, 0.005, 0)).norm(), 1e-15);
+  EXPECT_EQ(scene.PhaseOfStep(1), 0);
+  EXPECT_EQ(scene.PhaseOfStep(30), 0);
+  EXPECT_EQ(scene.PhaseOfStep(31), 1);
+  EXPECT_EQ(scene.PhaseOfStep(310), 4);
+  EXPECT_DOUBLE_EQ(scene.friction_coefficient, 0.3);
+}
+
+TEST(SceneFileTest, Benchmark2ClampsOnlyTheLeftEnd) {
+  const sim::SceneSpec scene = LoadSceneFile(kBenchmark2);
+  ASSERT_EQ(scene.obstacle.clamped_faces.size(), 1u);
+  EXPECT_EQ(scene.obstacle.clamped_faces[0], fem::BoxFace::kXMin);
+}
+
+TEST(SceneFileTest, SyntaxErrorNamesLineAndColumn) {
+  // "divisions_y = 4" instead of "divisions_y: 4" on the obstacle's box.
+  const std::string message = ErrorOf(Benchmark1With("divisions_y: 4\n    divisions_z: 4",
+                                                     "divisions_y = 4\n    divisions_z: 4"));
+  const std::string text = ReadFile(kBenchmark1);
+  const auto at = text.find("divisions_y: 4");
+  const auto line_start = text.rfind('\n', at) + 1;
+  const int column = static_cast<int>(at - line_start) + static_cast<int>(std::string("divisions_y ").size()) + 1;
+  EXPECT_NE(message.find("scene.txtpb:" + std::to_string(LineOf("divisions_y: 4")) + ":" +
+                         std::to_string(column) + ":"),
+            std::string::npos) << message;
+  EXPECT_NE(message.find("\"=\""), std::string::npos) << message;
+}
+
+TEST(SceneFileTest, UnknownFieldIsASyntaxErrorWithItsLine) {
+  const std::string message =
+      ErrorOf(Benchmark1With("force_gain: 0.25", "force_gain: 0.25\nforce_gian: 2"));
+  EXPECT_NE(message.find("force_gian"), std::string::npos) << message;
+  EXPECT_NE(message.find("scene.txtpb:" + std::to_string(LineOf("force_gain: 0.25") + 1) + ":"),
+            std::string::npos) << message;
+}
+
+TEST(SceneFileTest, NonPositiveYoungsModulusNamesFieldAndLine) {
+  const std::string message =
+      ErrorOf(Benchmark1With("youngs_modulus_pa: 3.0e6", "youngs_modulus_pa: -3.0e6"));
+  EXPECT_NE(message.find("obstacle.material.youngs_modulus_pa"), std::string::npos) << message;
+  EXPECT_NE(message.find("> 0 Pa"), std::string::npos) << message;
+  EXPECT_NE(message.find("scene.txtpb:" + std::to_string(LineOf("youngs_modulus_pa: 3.0e6")) + ":"),
+            std::string::npos) << message;
+}
+
+TEST(SceneFileTest, IncompressiblePoissonRatioIsRejected) {
+  const std::string message = ErrorOf(Benchmark1With(
+      "youngs_modulus_pa: 8.0e7 poisson_ratio: 0.3", "youngs_modulus_pa: 8.0e7 poisson_ratio: 0.5"));
+  EXPECT_NE(message.find("tool.material.poisson_ratio"), std::string::npos) << message;
+  EXPECT_NE(message.find("(-1, 0.5)"), std::string::npos) << message;
+}
+
+TEST(SceneFileTest, BodyWithoutDirichletConditionIsRejectedAsSingular) {
+  std::string text = Benchmark1With("  clamped_faces: X_MIN\n  clamped_faces: X_MAX\n", "");
+  const std::string message = ErrorOf(text);
+  EXPECT_NE(message.find("obstacle.clamped_faces"), std::string::npos) << message;
+  EXPECT_NE(message.find("singular"), std::string::npos) << message;
+}
+
+TEST(SceneFileTest, ZeroSizedBoxWouldGiveDegenerateElementsAndIsRejected) {
+  const std::string message =
+      ErrorOf(Benchmark1With("size_m { x: 0.02 y: 0.02 z: 0.01 }", "size_m { x: 0.02 y: 0.02 z: 0 }"));
+  EXPECT_NE(message.find("tool.box.size_m"), std::string::npos) << message;
+}
+
+TEST(SceneFileTest, ZeroDivisionsAreRejected) {
+  const std::string message = ErrorOf(Benchmark1With("divisions_x: 20", "divisions_x: 0"));
+  EXPECT_NE(message.find("obstacle.box.divisions_x"), std::string::npos) << message;
+}
+
+TEST(SceneFileTest, WrongFormatVersionIsRejected) {
+  const std::string message = ErrorOf(Benchmark1With("format_version: 1", "format_version: 7"));
+  EXPECT_NE(message.find("format_version"), std::string::npos) << message;
+  EXPECT_NE(message.find("version 1"), std::string::npos) << message;
+}
+
+TEST(SceneFileTest, ToolWithoutDrivenFaceIsRejected) {
+  const std::string message = ErrorOf(Benchmark1With("driven_face: Z_MAX", "clamped_faces: Z_MAX"));
+  EXPECT_NE(message.find("tool.driven_face"), std::string::npos) << message;
+}
+
+TEST(SceneFileTest, TrajectoryPhaseWithoutStepsIsRejected) {
+  const std::string message = ErrorOf(Benchmark1With("steps: 50", "steps: 0"));
+  EXPECT_NE(message.find("trajectory.phases[2].steps"), std::string::npos) << message;
+}
+
+TEST(SceneFileTest, MissingFileIsAClearError) {
+  try {
+    LoadSceneFile("/nonexistent/scene.txtpb");
+    FAIL() << "expected InputError";
+  } catch (const InputError& error) {
+    EXPECT_NE(std::string(error.what()).find("cannot open"), std::string::npos);
+  }
+}
+
+}  // namespace
+}  // namespace hapco::io
