@@ -9,6 +9,7 @@
 #include <cstring>
 #include <filesystem>
 #include <memory>
+#include <new>
 #include <sstream>
 #include <utility>
 #include <vector>
@@ -99,6 +100,8 @@ void RequireGroup(hid_t file, const std::string& path, const std::string& name) 
   if (type != H5I_GROUP) Fail(path, name + " is not a group");
 }
 
+constexpr std::size_t kMaxStringBytes = 1 << 20;  // info text, a sanity bound
+
 struct DatasetShape {
   H5T_class_t type_class = H5T_NO_CLASS;
   long points = 0;
@@ -123,29 +126,63 @@ DatasetShape InspectDataset(hid_t file, const std::string& path, const std::stri
   return shape;
 }
 
-DatasetShape RequireIntegers(hid_t file, const std::string& path, const std::string& name) {
+// Reads the whole dataset as libfclib will (same memory type), so that a dataset whose
+// metadata is fine but whose data cannot be read (a corrupted file) fails here and not in
+// libfclib. `memory_type` < 0 reads with the file's own type (strings, as H5LT does).
+void TrialRead(hid_t file, const std::string& path, const std::string& name,
+               const DatasetShape& shape, hid_t memory_type, std::size_t bytes_per_point) {
+  H5Id dataset(H5Dopen2(file, name.c_str(), H5P_DEFAULT), H5Dclose);
+  if (!dataset.valid()) Fail(path, "cannot open " + name);
+  H5Id file_type(H5Dget_type(dataset.get()), H5Tclose);
+  std::vector<unsigned char> buffer(static_cast<std::size_t>(shape.points) * bytes_per_point +
+                                    1);
+  const hid_t type = memory_type >= 0 ? memory_type : file_type.get();
+  if (H5Dread(dataset.get(), type, H5S_ALL, H5S_ALL, H5P_DEFAULT, buffer.data()) < 0) {
+    Fail(path, "cannot read the data of " + name + " (corrupt file?)");
+  }
+}
+
+void CheckPoints(const std::string& path, const std::string& name, const DatasetShape& shape,
+                 long min_points, long max_points) {
+  if (shape.points >= min_points && shape.points <= max_points) return;
+  std::ostringstream msg;
+  msg << name << " has " << shape.points << " entries, expected ";
+  if (min_points == max_points) {
+    msg << min_points;
+  } else {
+    msg << "between " << min_points << " and " << max_points;
+  }
+  Fail(path, msg.str());
+}
+
+// Integer dataset with min_points..max_points entries, checked before anything is read.
+DatasetShape RequireIntegers(hid_t file, const std::string& path, const std::string& name,
+                             long min_points, long max_points) {
   const DatasetShape shape = InspectDataset(file, path, name);
   if (shape.type_class != H5T_INTEGER) Fail(path, name + " must hold integers");
+  CheckPoints(path, name, shape, min_points, max_points);
+  TrialRead(file, path, name, shape, H5T_NATIVE_INT, sizeof(int));
   return shape;
 }
 
+// Numeric dataset (read as double, as libfclib does) with min_points..max_points entries.
 DatasetShape RequireNumbers(hid_t file, const std::string& path, const std::string& name,
-                            long points) {
+                            long min_points, long max_points) {
   const DatasetShape shape = InspectDataset(file, path, name);
   if (shape.type_class != H5T_FLOAT && shape.type_class != H5T_INTEGER) {
     Fail(path, name + " must hold numbers");
   }
-  if (points >= 0 && shape.points != points) {
-    std::ostringstream msg;
-    msg << name << " has " << shape.points << " entries, expected " << points;
-    Fail(path, msg.str());
-  }
+  CheckPoints(path, name, shape, min_points, max_points);
+  TrialRead(file, path, name, shape, H5T_NATIVE_DOUBLE, sizeof(double));
   return shape;
+}
+DatasetShape RequireNumbers(hid_t file, const std::string& path, const std::string& name,
+                            long points) {
+  return RequireNumbers(file, path, name, points, points);
 }
 
 int ReadInt(hid_t file, const std::string& path, const std::string& name) {
-  const DatasetShape shape = RequireIntegers(file, path, name);
-  if (shape.points != 1) Fail(path, name + " must hold exactly one integer");
+  RequireIntegers(file, path, name, 1, 1);
   H5Id dataset(H5Dopen2(file, name.c_str(), H5P_DEFAULT), H5Dclose);
   int value = 0;
   if (H5Dread(dataset.get(), H5T_NATIVE_INT, H5S_ALL, H5S_ALL, H5P_DEFAULT, &value) < 0) {
@@ -154,15 +191,46 @@ int ReadInt(hid_t file, const std::string& path, const std::string& name) {
   return value;
 }
 
+// Whether `group` has a link called `name`, found by iterating the links as libfclib's
+// H5LTfind_dataset does: in a corrupted file a name lookup (H5Lexists) can miss a link that
+// the iteration still finds, and libfclib would then fail to open it.
+bool ListedInGroup(hid_t file, const std::string& path, const std::string& group,
+                   const std::string& name) {
+  struct Search {
+    const std::string* name;
+    bool found;
+  } search{&name, false};
+  auto visit = [](hid_t, const char* link_name, const H5L_info_t*, void* data) -> herr_t {
+    auto* s = static_cast<Search*>(data);
+    if (*s->name == link_name) {
+      s->found = true;
+      return 1;  // stop
+    }
+    return 0;
+  };
+  H5Id group_id(H5Gopen2(file, group.c_str(), H5P_DEFAULT), H5Gclose);
+  if (!group_id.valid()) Fail(path, "cannot open group " + group);
+  hsize_t index = 0;
+  if (H5Literate(group_id.get(), H5_INDEX_NAME, H5_ITER_NATIVE, &index, visit, &search) < 0) {
+    Fail(path, "cannot list the links of " + group + " (corrupt file?)");
+  }
+  return search.found;
+}
+
 // Size in bytes of a fixed-length string dataset (libfclib reads it with H5LT into a buffer
 // of that size: a variable-length string or an array of strings would be read wrongly).
 std::size_t RequireOptionalString(hid_t file, const std::string& path,
-                                  const std::string& name) {
-  if (!Exists(file, name)) return 0;
+                                  const std::string& group, const std::string& leaf) {
+  const std::string name = group + "/" + leaf;
+  if (!ListedInGroup(file, path, group, leaf) && !Exists(file, name)) return 0;
   const DatasetShape shape = InspectDataset(file, path, name);
   if (shape.type_class != H5T_STRING || shape.variable_string || shape.points != 1) {
     Fail(path, name + " must be one fixed-length string (as H5LTmake_dataset_string writes)");
   }
+  if (shape.type_size > kMaxStringBytes) {
+    Fail(path, name + " is longer than " + std::to_string(kMaxStringBytes) + " bytes");
+  }
+  TrialRead(file, path, name, shape, -1, shape.type_size);
   return shape.type_size;
 }
 
@@ -218,46 +286,46 @@ LocalLayout CheckLocalLayout(hid_t file, const std::string& path) {
                    "; expected -1 (compressed columns), -2 (compressed rows) or >= 0 (triplet)");
   }
   if (nzmax < 0) Fail(path, "W/nzmax is negative");
-  const DatasetShape p = RequireIntegers(file, path, "/fclib_local/W/p");
-  const DatasetShape i = RequireIntegers(file, path, "/fclib_local/W/i");
-  const DatasetShape x = RequireNumbers(file, path, "/fclib_local/W/x", -1);
+  if (nz > nzmax) {
+    Fail(path, "W/nz = " + std::to_string(nz) + " exceeds W/nzmax = " + std::to_string(nzmax));
+  }
+  // Bound the sizes before anything is allocated (a corrupt file can declare anything):
+  // more than n^2 stored entries is not a sane W.
+  const long nn = static_cast<long>(n) * n;
+  if (nzmax > nn || nz > nn) {
+    msg << "W declares nz = " << nz << ", nzmax = " << nzmax << " for a " << n << "x" << n
+        << " matrix (at most " << nn << " entries)";
+    Fail(path, msg.str());
+  }
   const long p_expected = nz >= 0 ? nz : static_cast<long>(n) + 1;  // n == m
   const long i_expected = nz >= 0 ? nz : nzmax;
-  if (p.points != p_expected || i.points != i_expected) {
-    msg << "W/p and W/i have " << p.points << " and " << i.points << " entries; "
-        << (nz >= 0 ? "a triplet W with nz = " : "a compressed W with nzmax = ")
-        << (nz >= 0 ? nz : nzmax) << " needs " << p_expected << " and " << i_expected;
-    Fail(path, msg.str());
-  }
+  RequireIntegers(file, path, "/fclib_local/W/p", p_expected, p_expected);
+  RequireIntegers(file, path, "/fclib_local/W/i", i_expected, i_expected);
   // libfclib reads all of x into nzmax doubles: more would overflow; fewer than the entries
-  // in use would leave values uninitialised.
+  // in use (nz for triplets, nzmax otherwise) would leave values uninitialised.
   const long used = nz >= 0 ? nz : nzmax;
-  const long nn = static_cast<long>(n) * n;
-  if (x.points > nzmax || x.points < used || (nz >= 0 && nzmax > std::max<long>(nz, nn))) {
-    msg << "W/x has " << x.points << " entries but nzmax = " << nzmax << " and " << used
-        << " entries are in use";
-    Fail(path, msg.str());
-  }
   if (used == 0) Fail(path, "W stores no entries");
+  const DatasetShape x = RequireNumbers(file, path, "/fclib_local/W/x", used, nzmax);
   layout.x_points = x.points;
   // Optional matrix info, read by libfclib when "conditioning" is present.
-  if (Exists(file, "/fclib_local/W/conditioning")) {
+  if (ListedInGroup(file, path, "/fclib_local/W", "conditioning") ||
+      Exists(file, "/fclib_local/W/conditioning")) {
     RequireNumbers(file, path, "/fclib_local/W/conditioning", 1);
     RequireNumbers(file, path, "/fclib_local/W/determinant", 1);
-    if (RequireIntegers(file, path, "/fclib_local/W/rank").points != 1) {
-      Fail(path, "/fclib_local/W/rank must hold exactly one integer");
+    RequireIntegers(file, path, "/fclib_local/W/rank", 1, 1);
+    if (ListedInGroup(file, path, "/fclib_local/W", "comment")) {
+      RequireOptionalString(file, path, "/fclib_local/W", "comment");
     }
-    RequireOptionalString(file, path, "/fclib_local/W/comment");
   }
   RequireGroup(file, path, "/fclib_local/vectors");
   RequireNumbers(file, path, "/fclib_local/vectors/q", m);
   RequireNumbers(file, path, "/fclib_local/vectors/mu", m / 3);
   if (Exists(file, "/fclib_local/info")) {
     RequireGroup(file, path, "/fclib_local/info");
-    layout.title_size = RequireOptionalString(file, path, "/fclib_local/info/title");
+    layout.title_size = RequireOptionalString(file, path, "/fclib_local/info", "title");
     layout.description_size =
-        RequireOptionalString(file, path, "/fclib_local/info/description");
-    layout.math_info_size = RequireOptionalString(file, path, "/fclib_local/info/math_info");
+        RequireOptionalString(file, path, "/fclib_local/info", "description");
+    layout.math_info_size = RequireOptionalString(file, path, "/fclib_local/info", "math_info");
   }
   return layout;
 }
@@ -276,7 +344,12 @@ LocalLayout CheckFile(const std::string& path, bool* has_solution = nullptr,
   CheckIsHdf5File(path);
   H5Id file(H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT), H5Fclose);
   if (!file.valid()) Fail(path, "cannot be opened by HDF5 (corrupt or locked?)");
-  const LocalLayout layout = CheckLocalLayout(file.get(), path);
+  LocalLayout layout;
+  try {
+    layout = CheckLocalLayout(file.get(), path);
+  } catch (const std::bad_alloc&) {
+    Fail(path, "declares datasets too large to read (corrupt file?)");
+  }
   if (has_solution != nullptr) *has_solution = Exists(file.get(), "/solution");
   if (has_global != nullptr) *has_global = Exists(file.get(), "/fclib_global");
   return layout;

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <filesystem>
+#include <fstream>
 #include <random>
 #include <string>
 
@@ -254,7 +255,7 @@ TEST(FclibRead, NanInFreeDisplacement) {
 }
 
 TEST(FclibRead, ValuesShorterThanNzmax) {
-  ExpectInputError(DataFile("bad_short_x.hdf5"), "W/x has 18 entries but nzmax = 21");
+  ExpectInputError(DataFile("bad_short_x.hdf5"), "/fclib_local/W/x has 18 entries, expected 21");
 }
 
 TEST(FclibRead, FrictionCoefficientSizeMismatch) {
@@ -263,6 +264,35 @@ TEST(FclibRead, FrictionCoefficientSizeMismatch) {
 
 TEST(FclibRead, VariableLengthTitleIsRejectedNotMisread) {
   ExpectInputError(DataFile("bad_vlen_title.hdf5"), "fixed-length string");
+}
+
+// libfclib calls exit(1) when an HDF5 read fails; every such failure must be caught by the
+// checks before it. Corrupt a valid file at random bytes (fixed seed): each read returns a
+// problem or throws InputError, and the test process survives.
+TEST(FclibRead, CorruptedFilesThrowOrReadNeverExit) {
+  for (const char* name : {"siconos_triplet.hdf5", "siconos_dense_csr.hdf5"}) {
+    std::string original(std::filesystem::file_size(DataFile(name)), '\0');
+    std::ifstream(DataFile(name), std::ios::binary)
+        .read(original.data(), static_cast<std::streamsize>(original.size()));
+    ASSERT_GT(original.size(), 1000u);
+    std::mt19937 rng(2024);
+    std::uniform_int_distribution<std::size_t> offset(0, original.size() - 1);
+    std::uniform_int_distribution<int> byte(0, 255), flips(1, 8);
+    const std::string path = ScratchFile(std::string("_") + name);
+    int rejected = 0;
+    for (int trial = 0; trial < 200; ++trial) {
+      std::string corrupted = original;
+      for (int k = flips(rng); k > 0; --k) corrupted[offset(rng)] = static_cast<char>(byte(rng));
+      testing::WriteText(path, corrupted);
+      try {
+        ReadFclibLocalProblem(path);
+      } catch (const InputError& error) {
+        ++rejected;
+        EXPECT_NE(std::string(error.what()).find(path), std::string::npos);
+      }
+    }
+    EXPECT_GT(rejected, 20) << name;  // the corruption does hit the structure
+  }
 }
 
 // --- Solutions ---
