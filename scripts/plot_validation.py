@@ -95,6 +95,7 @@ def main():
     rows = read_rows(args.csv)
     if not rows:
         raise SystemExit(f"{args.csv}: no rows")
+    args.out = os.path.normpath(args.out)
     os.makedirs(args.out, exist_ok=True)
     limit, p = richardson_limit(rows)
     if limit is not None:

@@ -35,6 +35,8 @@ for Tet4 and Tet10 over a sequence of nested box meshes.
 
   --csv FILE   also write the table as CSV (input of scripts/plot_validation.py)
   --quick      skip the two largest meshes (for a fast check)
+  --case ORDER:NXxNYxNZ
+               run this mesh instead of the default sequence (repeatable), e.g. Tet10:12x3x3
   --help       this text
 )";
 
@@ -56,10 +58,10 @@ struct Row {
   double assembly_s = 0.0, factorization_s = 0.0, solve_s = 0.0;
 };
 
-Row RunCantilever(ElementOrder order, int nx, int nyz) {
+Row RunCantilever(ElementOrder order, int nx, int ny, int nz) {
   BoxMeshSpec spec;
   spec.size_m = Eigen::Vector3d(kLength, kWidth, kHeight);
-  spec.divisions = Eigen::Vector3i(nx, nyz, nyz);
+  spec.divisions = Eigen::Vector3i(nx, ny, nz);
   spec.order = order;
   ElasticBody::Spec s;
   s.mesh = MakeBoxMesh(spec);
@@ -101,9 +103,32 @@ Row RunCantilever(ElementOrder order, int nx, int nyz) {
   return row;
 }
 
+struct Case {
+  ElementOrder order;
+  int nx, ny, nz;
+  bool large;
+};
+
+Case ParseCase(const std::string& text) {
+  const auto colon = text.find(':');
+  Case c{ElementOrder::kTet10, 0, 0, 0, false};
+  const std::string order = text.substr(0, colon);
+  if (order == "Tet4") {
+    c.order = ElementOrder::kTet4;
+  } else if (order != "Tet10" || colon == std::string::npos) {
+    throw hapco::InputError("--case '" + text + "': expected Tet4:NXxNYxNZ or Tet10:NXxNYxNZ");
+  }
+  if (std::sscanf(text.c_str() + colon + 1, "%dx%dx%d", &c.nx, &c.ny, &c.nz) != 3 || c.nx < 1 ||
+      c.ny < 1 || c.nz < 1) {
+    throw hapco::InputError("--case '" + text + "': divisions must look like 20x4x4");
+  }
+  return c;
+}
+
 int Run(int argc, char** argv) {
   std::string csv_path;
   bool quick = false;
+  std::vector<Case> custom;
   for (int i = 1; i < argc; ++i) {
     const std::string arg = argv[i];
     if (arg == "--help" || arg == "-h") {
@@ -113,22 +138,21 @@ int Run(int argc, char** argv) {
       csv_path = argv[++i];
     } else if (arg == "--quick") {
       quick = true;
+    } else if (arg == "--case" && i + 1 < argc) {
+      custom.push_back(ParseCase(argv[++i]));
     } else {
       throw hapco::InputError("unknown argument '" + arg + "' (see --help)");
     }
   }
-  struct Case {
-    ElementOrder order;
-    int nx, nyz;
-    bool large;
-  };
-  const std::vector<Case> cases = {
-      {ElementOrder::kTet10, 5, 1, false},  {ElementOrder::kTet10, 10, 2, false},
-      {ElementOrder::kTet10, 15, 3, false}, {ElementOrder::kTet10, 20, 4, false},
-      {ElementOrder::kTet10, 30, 6, true},  {ElementOrder::kTet10, 40, 8, true},
-      {ElementOrder::kTet4, 10, 2, false},  {ElementOrder::kTet4, 20, 4, false},
-      {ElementOrder::kTet4, 40, 8, false},  {ElementOrder::kTet4, 60, 12, true},
-      {ElementOrder::kTet4, 80, 16, true}};
+  // Refinements of the bar with cubic cells (cells 5 mm down to 1.25 mm / 0.625 mm).
+  std::vector<Case> cases = {
+      {ElementOrder::kTet10, 5, 1, 1, false},   {ElementOrder::kTet10, 10, 2, 2, false},
+      {ElementOrder::kTet10, 15, 3, 3, false},  {ElementOrder::kTet10, 20, 4, 4, false},
+      {ElementOrder::kTet10, 30, 6, 6, true},   {ElementOrder::kTet10, 40, 8, 8, true},
+      {ElementOrder::kTet4, 10, 2, 2, false},   {ElementOrder::kTet4, 20, 4, 4, false},
+      {ElementOrder::kTet4, 40, 8, 8, false},   {ElementOrder::kTet4, 60, 12, 12, true},
+      {ElementOrder::kTet4, 80, 16, 16, true}};
+  if (!custom.empty()) cases = custom;
 
   std::printf("Cantilever: red bar %.2f x %.2f x %.2f m, E = %.3g Pa, nu = %.2f, tip load %.2f N\n",
               kLength, kWidth, kHeight, kYoungs, kPoisson, kLoad);
@@ -138,7 +162,7 @@ int Run(int argc, char** argv) {
   std::vector<Row> rows;
   for (const Case& c : cases) {
     if (quick && c.large) continue;
-    const Row r = RunCantilever(c.order, c.nx, c.nyz);
+    const Row r = RunCantilever(c.order, c.nx, c.ny, c.nz);
     const std::string div = std::to_string(r.divisions.x()) + "x" + std::to_string(r.divisions.y()) +
                             "x" + std::to_string(r.divisions.z());
     std::printf("%-6s %-9s %8d %14.6e %14.6e %10.3f %10.4f %10.4f %10.5f %10ld\n", ToString(r.order),
