@@ -89,7 +89,8 @@ class ContactDetector {
                   std::vector<Eigen::Vector3d> tool_normals = {});
 
   // Current (deformed) node positions: obstacle N_o x 3, tool N_t x 3 (reference +
-  // displacement), m. Fills *contacts (cleared first, in tool_nodes order). For each tool
+  // displacement), m. Only the corner nodes of the given triangles and the candidate tool
+  // nodes are read, so rows of other nodes may be stale. Fills *contacts (cleared first, in tool_nodes order). For each tool
   // node: among faces whose flat normal projection holds the node (within edge_tolerance),
   // that pass the normal check, with -max_penetration <= gap < activation_gap, the one with
   // the smallest |gap|; ties within round-off (a node on an edge shared by coplanar faces) go
