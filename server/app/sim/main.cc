@@ -1,0 +1,194 @@
+// hapco-sim: runs a scene's device trajectory offline (no network) through the haptic step
+// pipeline and writes one CSV row per step. Thin: the work is in hapco::sim.
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <fstream>
+#include <string>
+#include <unistd.h>
+
+#include "common/error.h"
+#include "common/timer.h"
+#include "io/scene_file.h"
+#include "sim/step_pipeline.h"
+
+namespace {
+
+constexpr const char* kUsage = R"(usage: hapco-sim SCENE.txtpb [options]
+
+Runs the scene's trajectory (the paper's five phases) through the contact pipeline: collision
+detection, flexibility operator, frictional contact solve, force on the device.
+
+  --solver NAME     local-uzawa | global-uzawa-gs | global-uzawa-jacobi | reference
+                    (default: the scene's solver)
+  --tol X           the paper's stop test ||dr||/rho < X, in m (default: the scene's)
+  --mu X            Coulomb friction coefficient (default: the scene's)
+  --max-iter N      outer iteration cap (default: the scene's)
+  --rho-scale X     multiply the paper's rho by X (stability studies; default 1)
+  --cold            start every step from r = 0 (the paper), not from the last forces
+  --mode MODE       precomputed (default; per-scene compliance, O(contacts) per step) or
+                    full (the paper's per-step sparse solves; slow, the reference)
+  --steps N         stop after N steps (default: the whole trajectory)
+  --csv FILE        one row per step (see the header line for columns and units)
+  --quiet           no progress line
+  --help            this text
+
+Exit code: 0 when every step converged, 2 when some did not (the run completes), 1 on bad input.
+)";
+
+struct Options {
+  std::string scene_path, csv_path, solver_name, mode = "precomputed";
+  double tolerance_m = 0, friction = -1, rho_scale = 1;
+  int max_iterations = 0, steps = 0;
+  bool cold = false, quiet = false;
+};
+
+double ParseDouble(const char* flag, const char* text) {
+  char* end = nullptr;
+  const double value = std::strtod(text, &end);
+  if (end == text || *end != '\0' || !std::isfinite(value)) {
+    throw hapco::InputError(std::string(flag) + " expects a number, got '" + text + "'");
+  }
+  return value;
+}
+
+int ParseInt(const char* flag, const char* text) {
+  char* end = nullptr;
+  const long value = std::strtol(text, &end, 10);
+  if (end == text || *end != '\0' || value < 1 || value > 100000000) {
+    throw hapco::InputError(std::string(flag) + " expects a positive integer, got '" + text + "'");
+  }
+  return static_cast<int>(value);
+}
+
+Options Parse(int argc, char** argv) {
+  Options options;
+  for (int i = 1; i < argc; ++i) {
+    const std::string arg = argv[i];
+    auto value = [&]() -> const char* {
+      if (i + 1 >= argc) throw hapco::InputError(arg + " needs a value (see --help)");
+      return argv[++i];
+    };
+    if (arg == "--help" || arg == "-h") {
+      std::fputs(kUsage, stdout);
+      std::exit(0);
+    } else if (arg == "--solver") {
+      options.solver_name = value();
+    } else if (arg == "--tol") {
+      options.tolerance_m = ParseDouble("--tol", value());
+      if (options.tolerance_m <= 0) throw hapco::InputError("--tol must be > 0 m");
+    } else if (arg == "--mu") {
+      options.friction = ParseDouble("--mu", value());
+      if (options.friction < 0) throw hapco::InputError("--mu must be >= 0");
+    } else if (arg == "--max-iter") {
+      options.max_iterations = ParseInt("--max-iter", value());
+    } else if (arg == "--rho-scale") {
+      options.rho_scale = ParseDouble("--rho-scale", value());
+      if (options.rho_scale <= 0) throw hapco::InputError("--rho-scale must be > 0");
+    } else if (arg == "--cold") {
+      options.cold = true;
+    } else if (arg == "--mode") {
+      options.mode = value();
+      if (options.mode != "precomputed" && options.mode != "full") {
+        throw hapco::InputError("--mode must be precomputed or full, got '" + options.mode + "'");
+      }
+    } else if (arg == "--steps") {
+      options.steps = ParseInt("--steps", value());
+    } else if (arg == "--csv") {
+      options.csv_path = value();
+    } else if (arg == "--quiet") {
+      options.quiet = true;
+    } else if (!arg.empty() && arg[0] == '-') {
+      throw hapco::InputError("unknown option " + arg + " (see --help)");
+    } else if (options.scene_path.empty()) {
+      options.scene_path = arg;
+    } else {
+      throw hapco::InputError("only one scene file is accepted (see --help)");
+    }
+  }
+  if (options.scene_path.empty()) throw hapco::InputError("missing SCENE argument (see --help)");
+  return options;
+}
+
+int Run(const Options& options) {
+  hapco::sim::SceneSpec scene = hapco::io::LoadSceneFile(options.scene_path);
+  if (options.friction >= 0) scene.friction_coefficient = options.friction;
+  if (!options.solver_name.empty()) scene.solver = hapco::contact::ParseSolverKind(options.solver_name);
+  if (options.tolerance_m > 0) scene.solver_parameters.global_tolerance_m = options.tolerance_m;
+  if (options.max_iterations > 0) scene.solver_parameters.max_iterations = options.max_iterations;
+  scene.solver_parameters.rho_scale = options.rho_scale;
+  if (options.cold) scene.solver_parameters.warm_start = false;
+
+  std::FILE* csv = nullptr;
+  if (!options.csv_path.empty()) {
+    csv = std::fopen(options.csv_path.c_str(), "w");
+    if (csv == nullptr) throw hapco::InputError("cannot write " + options.csv_path);
+  }
+  hapco::Stopwatch setup;
+  const hapco::sim::TwoBodyModel model(scene);
+  const auto& model_stats = model.stats();
+  const bool progress = !options.quiet && isatty(fileno(stderr));
+  std::printf("scene %s: obstacle %d dofs, tool %d dofs; %zu obstacle + %zu tool candidate nodes; "
+              "precomputation %.2f s (%.1f MiB of operators)\n",
+              scene.name.c_str(), model.obstacle().num_dofs(), model.tool().num_dofs(),
+              model.obstacle_candidates().size(), model.tool_candidates().size(),
+              setup.ElapsedSeconds(), static_cast<double>(model_stats.operator_bytes) / (1 << 20));
+  hapco::sim::TwoBodySession session(
+      model, options.mode == "full" ? hapco::sim::SolveMode::kFullSolve : hapco::sim::SolveMode::kPrecomputed);
+  std::printf("solver %s, tolerance %.3g m, mu %.3g, %s start, mode %s\n",
+              std::string(hapco::contact::SolverName(session.solver)).c_str(),
+              session.parameters.global_tolerance_m, scene.friction_coefficient,
+              session.parameters.warm_start ? "warm" : "cold", options.mode.c_str());
+  if (csv != nullptr) {
+    std::fprintf(csv, "step,phase,dx_m,dy_m,dz_m,fx_n,fy_n,fz_n,device_fx_n,device_fy_n,device_fz_n,"
+                      "contacts,separating,sticking,sliding,outer_iterations,inner_iterations,"
+                      "solve_s,step_s,fc3d_error,paper_error_m,status\n");
+  }
+  const int steps = options.steps > 0 ? std::min(options.steps, scene.total_steps()) : scene.total_steps();
+  int not_converged = 0;
+  double peak_force_n = 0;
+  long total_iterations = 0;
+  hapco::Stopwatch run;
+  for (int step = 1; step <= steps; ++step) {
+    const auto& out = session.Step(scene.DeviceTranslationAtStep(step));
+    const int phase = scene.PhaseOfStep(step);
+    if (out.status != hapco::contact::SolverStatus::kConverged) ++not_converged;
+    peak_force_n = std::max(peak_force_n, out.contact_force_n.norm());
+    total_iterations += out.iterations;
+    if (csv != nullptr) {
+      std::fprintf(csv, "%d,%s,%.9g,%.9g,%.9g,%.12g,%.12g,%.12g,%.12g,%.12g,%.12g,%d,%d,%d,%d,%d,%d,%.6g,%.6g,%.6g,%.6g,%s\n",
+                   step, scene.trajectory[static_cast<std::size_t>(phase)].name.c_str(),
+                   out.device_translation_m.x(), out.device_translation_m.y(), out.device_translation_m.z(),
+                   out.contact_force_n.x(), out.contact_force_n.y(), out.contact_force_n.z(),
+                   out.device_force_n.x(), out.device_force_n.y(), out.device_force_n.z(),
+                   out.num_contacts, out.state_counts[0], out.state_counts[1], out.state_counts[2],
+                   out.iterations, out.inner_iterations, out.solve_seconds, out.total_seconds,
+                   out.fc3d_error, out.paper_error_m,
+                   std::string(hapco::contact::StatusName(out.status)).c_str());
+    }
+    if (progress && (step % 10 == 0 || step == steps)) {
+      std::fprintf(stderr, "\rstep %d/%d  phase %-8s  |F| %7.3f N  contacts %3d  iterations %4d",
+                   step, steps, scene.trajectory[static_cast<std::size_t>(phase)].name.c_str(),
+                   out.contact_force_n.norm(), out.num_contacts, out.iterations);
+    }
+  }
+  if (progress) std::fputc('\n', stderr);
+  if (csv != nullptr) std::fclose(csv);
+  std::printf("%d steps in %.2f s: peak contact force %.3f N, %ld outer iterations, %d not converged\n",
+              steps, run.ElapsedSeconds(), peak_force_n, total_iterations, not_converged);
+  return not_converged > 0 ? 2 : 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  try {
+    return Run(Parse(argc, argv));
+  } catch (const hapco::InputError& error) {
+    std::fprintf(stderr, "hapco-sim: %s\n", error.what());
+    return 1;
+  } catch (const std::exception& error) {
+    std::fprintf(stderr, "hapco-sim: unexpected error: %s\n", error.what());
+    return 3;
+  }
+}
