@@ -191,9 +191,10 @@ int ReadInt(hid_t file, const std::string& path, const std::string& name) {
   return value;
 }
 
-// Whether `group` has a link called `name`, found by iterating the links as libfclib's
-// H5LTfind_dataset does: in a corrupted file a name lookup (H5Lexists) can miss a link that
-// the iteration still finds, and libfclib would then fail to open it.
+// Whether `group` has a link whose name starts with `name`, found by iterating the links as
+// libfclib's H5LTfind_dataset does (it compares only strlen(name) characters): in a corrupted
+// file a name lookup (H5Lexists) can miss a link, e.g. "title\201", that this search finds,
+// and libfclib would then fail to open "title" and exit.
 bool ListedInGroup(hid_t file, const std::string& path, const std::string& group,
                    const std::string& name) {
   struct Search {
@@ -202,7 +203,7 @@ bool ListedInGroup(hid_t file, const std::string& path, const std::string& group
   } search{&name, false};
   auto visit = [](hid_t, const char* link_name, const H5L_info_t*, void* data) -> herr_t {
     auto* s = static_cast<Search*>(data);
-    if (*s->name == link_name) {
+    if (std::strncmp(link_name, s->name->c_str(), s->name->size()) == 0) {
       s->found = true;
       return 1;  // stop
     }
@@ -222,7 +223,10 @@ bool ListedInGroup(hid_t file, const std::string& path, const std::string& group
 std::size_t RequireOptionalString(hid_t file, const std::string& path,
                                   const std::string& group, const std::string& leaf) {
   const std::string name = group + "/" + leaf;
-  if (!ListedInGroup(file, path, group, leaf) && !Exists(file, name)) return 0;
+  const bool listed = ListedInGroup(file, path, group, leaf);
+  const bool exists = Exists(file, name);
+  if (!listed && !exists) return 0;
+  if (!exists) Fail(path, name + " is listed but cannot be opened (corrupt file?)");
   const DatasetShape shape = InspectDataset(file, path, name);
   if (shape.type_class != H5T_STRING || shape.variable_string || shape.points != 1) {
     Fail(path, name + " must be one fixed-length string (as H5LTmake_dataset_string writes)");
@@ -308,8 +312,7 @@ LocalLayout CheckLocalLayout(hid_t file, const std::string& path) {
   const DatasetShape x = RequireNumbers(file, path, "/fclib_local/W/x", used, nzmax);
   layout.x_points = x.points;
   // Optional matrix info, read by libfclib when "conditioning" is present.
-  if (ListedInGroup(file, path, "/fclib_local/W", "conditioning") ||
-      Exists(file, "/fclib_local/W/conditioning")) {
+  if (ListedInGroup(file, path, "/fclib_local/W", "conditioning")) {
     RequireNumbers(file, path, "/fclib_local/W/conditioning", 1);
     RequireNumbers(file, path, "/fclib_local/W/determinant", 1);
     RequireIntegers(file, path, "/fclib_local/W/rank", 1, 1);
