@@ -75,19 +75,6 @@ Eigen::Vector3d ProjectionBarycentric(const Eigen::Vector3d& p, const Eigen::Vec
   return {1.0 - v - w, v, w};
 }
 
-// Rows n, t1, t2 (algorithms.md §2). t1 from e_x, or e_y when n is close to ±e_x.
-Eigen::Matrix3d FrameFromNormal(const Eigen::Vector3d& n) {
-  const Eigen::Vector3d axis =
-      std::abs(n.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
-  const Eigen::Vector3d t1 = (axis - axis.dot(n) * n).normalized();
-  const Eigen::Vector3d t2 = n.cross(t1);
-  Eigen::Matrix3d frame;
-  frame.row(0) = n.transpose();
-  frame.row(1) = t1.transpose();
-  frame.row(2) = t2.transpose();
-  return frame;
-}
-
 Eigen::Vector3d Row(const PointsRef& points, int i) { return points.row(i).transpose(); }
 
 void CheckParameters(const CollisionParameters& p) {
@@ -110,6 +97,19 @@ void CheckParameters(const CollisionParameters& p) {
 }
 
 }  // namespace
+
+Eigen::Matrix3d FrameFromNormal(const Eigen::Vector3d& n) {
+  const Eigen::Vector3d axis =
+      std::abs(n.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
+  const Eigen::Vector3d t1 = (axis - axis.dot(n) * n).normalized();
+  const Eigen::Vector3d t2 = n.cross(t1);
+  Eigen::Matrix3d frame;
+  frame.row(0) = n.transpose();
+  frame.row(1) = t1.transpose();
+  frame.row(2) = t2.transpose();
+  return frame;
+}
+
 
 ContactDetector::ContactDetector(std::vector<fem::SurfaceTriangle> obstacle_triangles,
                                  const PointsRef& obstacle_reference_positions_m,

@@ -157,6 +157,10 @@ class ContactDetector {
   DetectorStats stats_;
 };
 
+// Contact frame for a unit normal n: rows n, t1, t2 (algorithms.md §2); t1 is e_x minus its
+// normal part (e_y when n is close to ±e_x), t2 = n × t1.
+Eigen::Matrix3d FrameFromNormal(const Eigen::Vector3d& n);
+
 // Outward unit normal at each of `nodes`: the area-weighted mean of the normals of the
 // triangles of `surface` whose three corners all belong to `nodes` (the candidate patch
 // itself, so a node on the patch's rim is not tilted by the adjacent side face). Throws

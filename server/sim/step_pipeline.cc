@@ -75,6 +75,9 @@ const StepOutput& TwoBodySession::Step(const Eigen::Vector3d& device_translation
             .transpose();
   }
   detector_.Detect(obstacle_positions_m_, tool_positions_m_, collision_, &contacts_);
+  for (ContactPoint& contact : contacts_) {
+    contact.frame = model_.obstacle_reference_frames()[static_cast<std::size_t>(contact.obstacle_triangle)];
+  }
   device_translation_m_ = device_translation_m;
   output_.num_contacts = static_cast<int>(contacts_.size());
   output_.detect_seconds = watch.ElapsedSeconds();

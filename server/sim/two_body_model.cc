@@ -105,6 +105,12 @@ TwoBodyModel::TwoBodyModel(SceneSpec scene)
   if (obstacle_triangles_.empty()) {
     throw InputError("the tool's path never reaches the obstacle's facing surface: no candidate contact faces");
   }
+  for (const fem::SurfaceTriangle& triangle : obstacle_triangles_) {
+    const Eigen::Vector3d p0 = nodes_m.row(triangle.corners[0]).transpose();
+    const Eigen::Vector3d p1 = nodes_m.row(triangle.corners[1]).transpose();
+    const Eigen::Vector3d p2 = nodes_m.row(triangle.corners[2]).transpose();
+    obstacle_frames_.push_back(FrameFromNormal((p1 - p0).cross(p2 - p0).normalized()));
+  }
   std::sort(obstacle_candidates_.begin(), obstacle_candidates_.end());
   obstacle_candidates_.erase(std::unique(obstacle_candidates_.begin(), obstacle_candidates_.end()),
                              obstacle_candidates_.end());

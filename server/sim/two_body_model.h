@@ -36,6 +36,11 @@ class TwoBodyModel {
   // Obstacle faces that can be touched: on the box face that looks at the tool, within the
   // footprint the tool sweeps along the whole trajectory plus a margin of one cell.
   const std::vector<fem::SurfaceTriangle>& obstacle_triangles() const { return obstacle_triangles_; }
+  // Contact frame (rows n, t1, t2) of each of those faces in the reference configuration.
+  // Small-displacement theory: the contact normal is the undeformed face normal, so W, ũ and
+  // the force directions stay consistent with the linear model (a frictionless press gives
+  // no side force); the deformed geometry only decides where a tool node sits.
+  const std::vector<Eigen::Matrix3d>& obstacle_reference_frames() const { return obstacle_frames_; }
   // Sorted node ids carrying those faces, and node id -> position in that list (-1 if absent).
   const std::vector<int>& obstacle_candidates() const { return obstacle_candidates_; }
   const std::vector<int>& obstacle_candidate_index() const { return obstacle_candidate_index_; }
@@ -57,6 +62,7 @@ class TwoBodyModel {
   fem::ElasticBody obstacle_;
   fem::ElasticBody tool_;
   std::vector<fem::SurfaceTriangle> obstacle_triangles_;
+  std::vector<Eigen::Matrix3d> obstacle_frames_;
   std::vector<int> obstacle_candidates_, obstacle_candidate_index_;
   std::vector<int> tool_candidates_, tool_candidate_index_;
   std::vector<Eigen::Vector3d> tool_normals_;

@@ -142,7 +142,7 @@ int Run(const Options& options) {
   if (csv != nullptr) {
     std::fprintf(csv, "step,phase,dx_m,dy_m,dz_m,fx_n,fy_n,fz_n,device_fx_n,device_fy_n,device_fz_n,"
                       "contacts,separating,sticking,sliding,outer_iterations,inner_iterations,"
-                      "solve_s,step_s,fc3d_error,paper_error_m,status\n");
+                      "detect_s,assemble_s,solve_s,update_s,step_s,fc3d_error,paper_error_m,status\n");
   }
   const int steps = options.steps > 0 ? std::min(options.steps, scene.total_steps()) : scene.total_steps();
   int not_converged = 0;
@@ -156,13 +156,14 @@ int Run(const Options& options) {
     peak_force_n = std::max(peak_force_n, out.contact_force_n.norm());
     total_iterations += out.iterations;
     if (csv != nullptr) {
-      std::fprintf(csv, "%d,%s,%.9g,%.9g,%.9g,%.12g,%.12g,%.12g,%.12g,%.12g,%.12g,%d,%d,%d,%d,%d,%d,%.6g,%.6g,%.6g,%.6g,%s\n",
+      std::fprintf(csv, "%d,%s,%.9g,%.9g,%.9g,%.12g,%.12g,%.12g,%.12g,%.12g,%.12g,%d,%d,%d,%d,%d,%d,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%s\n",
                    step, scene.trajectory[static_cast<std::size_t>(phase)].name.c_str(),
                    out.device_translation_m.x(), out.device_translation_m.y(), out.device_translation_m.z(),
                    out.contact_force_n.x(), out.contact_force_n.y(), out.contact_force_n.z(),
                    out.device_force_n.x(), out.device_force_n.y(), out.device_force_n.z(),
                    out.num_contacts, out.state_counts[0], out.state_counts[1], out.state_counts[2],
-                   out.iterations, out.inner_iterations, out.solve_seconds, out.total_seconds,
+                   out.iterations, out.inner_iterations, out.detect_seconds, out.assemble_seconds,
+                   out.solve_seconds, out.update_seconds, out.total_seconds,
                    out.fc3d_error, out.paper_error_m,
                    std::string(hapco::contact::StatusName(out.status)).c_str());
     }
