@@ -20,8 +20,8 @@ struct ElasticBodyStats {
 };
 
 // Immutable after construction (design.md, example 4): every query reuses the one factor, so a
-// haptic step never re-assembles or re-factors. Thread-compatible: const methods may run
-// concurrently only if CHOLMOD's workspace is not shared - call them from one thread.
+// haptic step never re-assembles or re-factors. Not thread-safe, even through const methods:
+// CHOLMOD keeps its workspace inside the solver, so solve from one thread at a time.
 class ElasticBody {
  public:
   struct Spec {
@@ -51,7 +51,10 @@ class ElasticBody {
   int num_free_dofs() const { return static_cast<int>(free_to_dof_.size()); }
   // Full assembled stiffness (3N x 3N, N/m, both triangles).
   const Eigen::SparseMatrix<double>& stiffness() const { return stiffness_; }
-  bool is_dirichlet_node(int node) const { return dof_to_free_[3 * static_cast<std::size_t>(node)] < 0; }
+  // True for clamped and driven nodes. node must be in 0..num_nodes-1.
+  bool is_dirichlet_node(int node) const {
+    return dof_to_free_[3 * static_cast<std::size_t>(node)] < 0;
+  }
 
   // Static solve with the stored factor: full displacement field (3N, m) under nodal loads
   // (3N, N; entries at Dirichlet dofs are ignored), clamped nodes fixed, driven nodes translated
