@@ -3,13 +3,16 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
+#include <memory>
 #include <string>
 #include <unistd.h>
 
 #include "common/error.h"
 #include "common/timer.h"
 #include "io/scene_file.h"
+#include "io/vtk_export.h"
 #include "sim/step_pipeline.h"
 
 namespace {
@@ -30,6 +33,9 @@ detection, flexibility operator, frictional contact solve, force on the device.
                     full (the paper's per-step sparse solves; slow, the reference)
   --steps N         stop after N steps (default: the whole trajectory)
   --csv FILE        one row per step (see the header line for columns and units)
+  --vtk DIR         write ParaView files to DIR: deformed bodies and contact points every
+                    --vtk-every steps (default 10) and at the last step; open DIR/hapco.pvd
+  --vtk-every N     VTK output period in steps
   --quiet           no progress line
   --help            this text
 
@@ -37,9 +43,9 @@ Exit code: 0 when every step converged, 2 when some did not (the run completes),
 )";
 
 struct Options {
-  std::string scene_path, csv_path, solver_name, mode = "precomputed";
+  std::string scene_path, csv_path, vtk_dir, solver_name, mode = "precomputed";
   double tolerance_m = 0, friction = -1, rho_scale = 1;
-  int max_iterations = 0, steps = 0;
+  int max_iterations = 0, steps = 0, vtk_every = 10;
   bool cold = false, quiet = false;
 };
 
@@ -96,6 +102,10 @@ Options Parse(int argc, char** argv) {
       options.steps = ParseInt("--steps", value());
     } else if (arg == "--csv") {
       options.csv_path = value();
+    } else if (arg == "--vtk") {
+      options.vtk_dir = value();
+    } else if (arg == "--vtk-every") {
+      options.vtk_every = ParseInt("--vtk-every", value());
     } else if (arg == "--quiet") {
       options.quiet = true;
     } else if (!arg.empty() && arg[0] == '-') {
@@ -108,6 +118,42 @@ Options Parse(int argc, char** argv) {
   }
   if (options.scene_path.empty()) throw hapco::InputError("missing SCENE argument (see --help)");
   return options;
+}
+
+// Writes the current state of the session as three VTK files and adds them to the collection.
+void WriteVtkStep(const std::string& dir, int step, const hapco::sim::TwoBodySession& session,
+                  const hapco::sim::TwoBodyModel& model, hapco::io::VtkCollection* collection) {
+  Eigen::VectorXd obstacle_u, tool_u, obstacle_f, tool_f;
+  session.FullDisplacements(&obstacle_u, &tool_u);
+  session.NodalContactForces(&obstacle_f, &tool_f);
+  char name[64];
+  const auto write_body = [&](const char* body, int part, const hapco::fem::Mesh& mesh,
+                              const Eigen::VectorXd& u, const Eigen::VectorXd& f) {
+    std::snprintf(name, sizeof(name), "%s_%05d.vtu", body, step);
+    hapco::io::WriteBodyVtu(dir + "/" + name, mesh, u, f);
+    collection->Add(step, part, name);
+  };
+  write_body("obstacle", 0, model.obstacle().mesh(), obstacle_u, obstacle_f);
+  write_body("tool", 1, model.tool().mesh(), tool_u, tool_f);
+  std::vector<hapco::io::ContactPointRecord> records;
+  const auto& result = session.last_result();
+  const double force_scale_n = result.force_n.size() > 0 ? result.force_n.cwiseAbs().maxCoeff() : 0.0;
+  for (std::size_t alpha = 0; alpha < session.contacts().size(); ++alpha) {
+    const auto& contact = session.contacts()[alpha];
+    const Eigen::Vector3d r = result.force_n.segment<3>(3 * static_cast<Eigen::Index>(alpha));
+    const Eigen::Vector3d u = result.displacement_m.segment<3>(3 * static_cast<Eigen::Index>(alpha));
+    hapco::io::ContactPointRecord record;
+    record.position_m = contact.obstacle_point_m;
+    record.normal = contact.frame.row(0).transpose();
+    record.force_n = contact.frame.transpose() * r;
+    record.state = static_cast<int>(hapco::contact::ClassifyContact(
+        r, u, 1e-9 * force_scale_n, session.parameters.global_tolerance_m));
+    record.gap_m = u[0];
+    records.push_back(record);
+  }
+  std::snprintf(name, sizeof(name), "contacts_%05d.vtu", step);
+  hapco::io::WriteContactsVtu(dir + "/" + name, records);
+  collection->Add(step, 2, name);
 }
 
 int Run(const Options& options) {
@@ -144,6 +190,13 @@ int Run(const Options& options) {
                       "contacts,separating,sticking,sliding,outer_iterations,inner_iterations,"
                       "detect_s,assemble_s,solve_s,update_s,step_s,fc3d_error,paper_error_m,status\n");
   }
+  std::unique_ptr<hapco::io::VtkCollection> collection;
+  if (!options.vtk_dir.empty()) {
+    std::error_code error;
+    std::filesystem::create_directories(options.vtk_dir, error);
+    if (error) throw hapco::InputError("cannot create VTK directory " + options.vtk_dir + ": " + error.message());
+    collection = std::make_unique<hapco::io::VtkCollection>(options.vtk_dir + "/hapco.pvd");
+  }
   const int steps = options.steps > 0 ? std::min(options.steps, scene.total_steps()) : scene.total_steps();
   int not_converged = 0;
   double peak_force_n = 0;
@@ -167,6 +220,9 @@ int Run(const Options& options) {
                    out.fc3d_error, out.paper_error_m,
                    std::string(hapco::contact::StatusName(out.status)).c_str());
     }
+    if (collection && (step % options.vtk_every == 0 || step == steps)) {
+      WriteVtkStep(options.vtk_dir, step, session, model, collection.get());
+    }
     if (progress && (step % 10 == 0 || step == steps)) {
       std::fprintf(stderr, "\rstep %d/%d  phase %-8s  |F| %7.3f N  contacts %3d  iterations %4d",
                    step, steps, scene.trajectory[static_cast<std::size_t>(phase)].name.c_str(),
@@ -175,6 +231,7 @@ int Run(const Options& options) {
   }
   if (progress) std::fputc('\n', stderr);
   if (csv != nullptr) std::fclose(csv);
+  if (collection) std::printf("ParaView: open %s/hapco.pvd\n", options.vtk_dir.c_str());
   std::printf("%d steps in %.2f s: peak contact force %.3f N, %ld outer iterations, %d not converged\n",
               steps, run.ElapsedSeconds(), peak_force_n, total_iterations, not_converged);
   return not_converged > 0 ? 2 : 0;

@@ -165,7 +165,9 @@ TEST(PipelineTest, SmallSidewaysPushSticksAndHoldsItsForce) {
     const Eigen::Vector3d held = session.Step(pressed + Eigen::Vector3d(2e-5, 0, 0)).contact_force_n;
     const double change = (held - previous).norm();
     EXPECT_LT(change, 1e-3 * pushed.contact_force_n.norm()) << "hold " << hold;
-    if (hold > 0) EXPECT_LT(change, 0.1 * previous_change + 1e-12 * held.norm()) << "hold " << hold;
+    if (hold > 0) {
+      EXPECT_LT(change, 0.1 * previous_change + 1e-12 * held.norm()) << "hold " << hold;
+    }
     previous = held;
     previous_change = change;
   }
@@ -180,7 +182,9 @@ TEST(PipelineTest, FrictionlessPressHasNoTangentialForceAndLiftSeparates) {
   for (int step = 1; step <= model.scene().total_steps(); ++step) {
     out = session.Step(model.scene().DeviceTranslationAtStep(step));
     EXPECT_LT(std::hypot(out.contact_force_n.x(), out.contact_force_n.y()), 1e-9 * (1 + out.contact_force_n.z()));
-    if (step == 6) EXPECT_GT(out.contact_force_n.z(), 1.0);
+    if (step == 6) {
+      EXPECT_GT(out.contact_force_n.z(), 1.0);
+    }
   }
   // Back at z = 0 after the lift: no force.
   EXPECT_LT(out.contact_force_n.norm(), 1e-9);

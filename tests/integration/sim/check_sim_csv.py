@@ -1,0 +1,25 @@
+#!/usr/bin/python3
+"""usage: check_sim_csv.py FILE STEPS — one row per step, finite values, every step converged,
+a force that grows while pressing and vanishes after the final lift."""
+import csv
+import math
+import sys
+
+rows = list(csv.DictReader(open(sys.argv[1])))
+steps = int(sys.argv[2])
+if [int(r["step"]) for r in rows] != list(range(1, steps + 1)):
+    raise SystemExit(f"expected steps 1..{steps}, got {len(rows)} rows")
+for r in rows:
+    for key, value in r.items():
+        if key not in ("phase", "status") and not math.isfinite(float(value)):
+            raise SystemExit(f"step {r['step']}: {key} = {value}")
+    if r["status"] != "converged":
+        raise SystemExit(f"step {r['step']}: status {r['status']}")
+press = [float(r["fz_n"]) for r in rows if r["phase"] == "press"]
+if not all(b > a for a, b in zip(press, press[1:])):
+    raise SystemExit("the normal force does not grow monotonically while pressing")
+last = rows[-1]
+if math.hypot(float(last["fx_n"]), float(last["fy_n"]), float(last["fz_n"])) > 1e-9:
+    raise SystemExit(f"force after the lift is not zero: {last['fx_n']} {last['fy_n']} {last['fz_n']}")
+print(f"{len(rows)} steps, peak fz {max(float(r['fz_n']) for r in rows):.3f} N")
+print("ok")
