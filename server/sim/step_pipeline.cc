@@ -22,10 +22,17 @@ TwoBodySession::TwoBodySession(const TwoBodyModel& model, SolveMode mode)
   solver = model.scene().solver;
   parameters = model.scene().solver_parameters;
   collision_.activation_gap_m = model.scene().activation_gap_m;
-  const int max_contacts = static_cast<int>(model.tool_candidates().size());
-  contacts_.reserve(static_cast<std::size_t>(max_contacts));
-  workspace_.Reserve(max_contacts, parameters.max_iterations);
-  result_.Reserve(max_contacts, parameters.max_iterations);
+  // Every workspace of the haptic path is sized here for the most contacts the scene can have
+  // (one per tool candidate node), so Step allocates only when m changes (W, ũ, μ).
+  max_contacts_ = static_cast<int>(model.tool_candidates().size());
+  contacts_.reserve(static_cast<std::size_t>(max_contacts_));
+  workspace_.Reserve(max_contacts_, parameters.max_iterations);
+  result_.Reserve(max_contacts_, parameters.max_iterations);
+  obstacle_slots_.resize(static_cast<std::size_t>(max_contacts_));
+  world_forces_n_.resize(3 * max_contacts_);
+  if (mode_ == SolveMode::kPrecomputed) {
+    spread_.resize(model.obstacle_compliance_m_per_n().rows(), 3 * max_contacts_);
+  }
   Reset();
 }
 
@@ -170,6 +177,7 @@ void TwoBodySession::AssembleProblem(const Eigen::MatrixXd& tool_compliance,
                                      const Eigen::MatrixXd& obstacle_compliance,
                                      const std::vector<int>& obstacle_map) {
   const int m = static_cast<int>(contacts_.size());
+  // Same-size resizes are free in Eigen: the 1 kHz path allocates only when m changes.
   problem_.flexibility_m_per_n.resize(3 * m, 3 * m);
   problem_.free_displacement_m.resize(3 * m);
   problem_.friction_coefficient.setConstant(m, model_.scene().friction_coefficient);
@@ -177,6 +185,30 @@ void TwoBodySession::AssembleProblem(const Eigen::MatrixXd& tool_compliance,
   const auto& obstacle_reference = model_.obstacle().mesh().nodes_m;
   const auto& tool_index = model_.tool_candidate_index();
   const auto& obstacle_index = model_.obstacle_candidate_index();
+  // Spread of the obstacle compliance by each contact's weights (world axes):
+  //     S_β = Σ_l w_βl C_obstacle(:, j_l)            (3n_o × 3 per contact)
+  // Three adjacent columns of a column-major matrix are one contiguous run, so this is six
+  // vectorised axpys per contact. It turns the 6 × 6 block double sum of every pair into six
+  // blocks, W_obs(α, β) = Σ_k w_αk S_β(i_k, :), and it is reused by the displacement update
+  // (U_obstacle = −Σ_β S_β r_β). Sized once per session in kPrecomputed mode.
+  const Eigen::Index spread_rows = obstacle_compliance.rows();
+  if (spread_.rows() != spread_rows || spread_.cols() < 3 * m) {
+    spread_.resize(spread_rows, std::max<Eigen::Index>(3 * m, 3 * max_contacts_));
+  }
+  for (int alpha = 0; alpha < m; ++alpha) {
+    const ContactPoint& a = contacts_[alpha];
+    std::array<int, 6>& slots = obstacle_slots_[static_cast<std::size_t>(alpha)];
+    for (int k = 0; k < a.num_obstacle_nodes; ++k) {
+      slots[static_cast<std::size_t>(k)] =
+          obstacle_map[static_cast<std::size_t>(a.obstacle_nodes[static_cast<std::size_t>(k)])];
+    }
+    auto spread = spread_.middleCols<3>(3 * alpha);
+    spread.noalias() = a.weights[0] * obstacle_compliance.middleCols<3>(3 * slots[0]);
+    for (int k = 1; k < a.num_obstacle_nodes; ++k) {
+      spread.noalias() += a.weights[static_cast<std::size_t>(k)] *
+                          obstacle_compliance.middleCols<3>(3 * slots[static_cast<std::size_t>(k)]);
+    }
+  }
 
   for (int alpha = 0; alpha < m; ++alpha) {
     const ContactPoint& a = contacts_[alpha];
@@ -196,20 +228,16 @@ void TwoBodySession::AssembleProblem(const Eigen::MatrixXd& tool_compliance,
     problem_.free_displacement_m[3 * alpha] = a.frame.row(0).dot(total_m);
     problem_.free_displacement_m.segment<2>(3 * alpha + 1) = a.frame.bottomRows<2>() * increment_m;
 
-    // W_αβ = R_α [C_tool(a, b) + Σ_k Σ_l w_αk w_βl C_obstacle(i_k, j_l)] R_βᵀ.
+    // W_αβ = R_α [C_tool(a, b) + Σ_k w_αk S_β(i_k, :)] R_βᵀ; W is symmetric, so β ≥ α only.
+    const std::array<int, 6>& slots = obstacle_slots_[static_cast<std::size_t>(alpha)];
     const int ta = tool_map[static_cast<std::size_t>(a.tool_node)];
     for (int beta = alpha; beta < m; ++beta) {
       const ContactPoint& b = contacts_[beta];
       const int tb = tool_map[static_cast<std::size_t>(b.tool_node)];
       Eigen::Matrix3d world = tool_compliance.block<3, 3>(3 * ta, 3 * tb);
       for (int k = 0; k < a.num_obstacle_nodes; ++k) {
-        const int ok = obstacle_map[static_cast<std::size_t>(a.obstacle_nodes[static_cast<std::size_t>(k)])];
-        Eigen::Matrix3d row_sum = Eigen::Matrix3d::Zero();
-        for (int l = 0; l < b.num_obstacle_nodes; ++l) {
-          const int ol = obstacle_map[static_cast<std::size_t>(b.obstacle_nodes[static_cast<std::size_t>(l)])];
-          row_sum += b.weights[static_cast<std::size_t>(l)] * obstacle_compliance.block<3, 3>(3 * ok, 3 * ol);
-        }
-        world += a.weights[static_cast<std::size_t>(k)] * row_sum;
+        world.noalias() += a.weights[static_cast<std::size_t>(k)] *
+                           spread_.block<3, 3>(3 * slots[static_cast<std::size_t>(k)], 3 * beta);
       }
       const Eigen::Matrix3d local = a.frame * world * b.frame.transpose();
       problem_.flexibility_m_per_n.block<3, 3>(3 * alpha, 3 * beta) = local;
@@ -219,20 +247,26 @@ void TwoBodySession::AssembleProblem(const Eigen::MatrixXd& tool_compliance,
 }
 
 void TwoBodySession::UpdatePrecomputed() {
-  // U = U_free(d) + C f over the candidate nodes: the compliance blocks are all we need.
-  Eigen::VectorXd obstacle_force_n = Eigen::VectorXd::Zero(obstacle_candidate_displacement_m_.size());
-  const auto& obstacle_index = model_.obstacle_candidate_index();
-  for (int alpha = 0; alpha < static_cast<int>(contacts_.size()); ++alpha) {
-    const ContactPoint& a = contacts_[alpha];
-    const Eigen::Vector3d world_n = a.frame.transpose() * result_.force_n.segment<3>(3 * alpha);
-    for (int k = 0; k < a.num_obstacle_nodes; ++k) {
-      const int index = obstacle_index[static_cast<std::size_t>(a.obstacle_nodes[static_cast<std::size_t>(k)])];
-      obstacle_force_n.segment<3>(3 * index) -= a.weights[static_cast<std::size_t>(k)] * world_n;
-    }
-  }
-  obstacle_candidate_displacement_m_.noalias() = model_.obstacle_compliance_m_per_n() * obstacle_force_n;
+  // U = U_free(d) + C f over the candidate nodes (algorithms.md §5, §6). The obstacle carries
+  // −w_βl f_β at the nodes of contact β, so U_obstacle = −Σ_β S_β f_β with the spread blocks
+  // of AssembleProblem (one matrix-vector product over the active columns, no allocation);
+  // the tool carries f_β at its node, so only the active compliance columns are touched.
+  const int m = static_cast<int>(contacts_.size());
+  const auto& tool_index = model_.tool_candidate_index();
+  const Eigen::MatrixXd& tool_compliance = model_.tool_compliance_m_per_n();
   tool_candidate_displacement_m_ = tool_free_candidate_m_;
-  tool_candidate_displacement_m_.noalias() += model_.tool_compliance_m_per_n() * tool_candidate_force_n_;
+  if (m == 0) {
+    obstacle_candidate_displacement_m_.setZero();
+    return;
+  }
+  for (int alpha = 0; alpha < m; ++alpha) {
+    const int ia = tool_index[static_cast<std::size_t>(contacts_[alpha].tool_node)];
+    const Eigen::Vector3d world_n = Block(tool_candidate_force_n_, ia);
+    world_forces_n_.segment<3>(3 * alpha) = -world_n;
+    tool_candidate_displacement_m_.noalias() += tool_compliance.middleCols<3>(3 * ia) * world_n;
+  }
+  obstacle_candidate_displacement_m_.noalias() =
+      spread_.leftCols(3 * m) * world_forces_n_.head(3 * m);
 }
 
 void TwoBodySession::NodalContactForces(Eigen::VectorXd* obstacle_n, Eigen::VectorXd* tool_n) const {

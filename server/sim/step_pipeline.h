@@ -109,6 +109,15 @@ class TwoBodySession {
   // kFullSolve scratch: the active nodes and their per-step compliance blocks.
   std::vector<int> active_obstacle_nodes_, active_tool_nodes_;
   std::vector<int> active_obstacle_map_, active_tool_map_;
+  // Haptic-path workspaces, sized once for max_contacts_ (see AssembleProblem).
+  int max_contacts_ = 0;
+  // Obstacle compliance spread by each contact's weights, world axes (rows: the compliance
+  // given to AssembleProblem, 3 columns per contact), m/N.
+  Eigen::MatrixXd spread_;
+  // Per contact: positions of its obstacle nodes in that compliance.
+  std::vector<std::array<int, 6>> obstacle_slots_;
+  // Minus the world contact force of each contact (3m_max, N): the obstacle's share.
+  Eigen::VectorXd world_forces_n_;
 };
 
 }  // namespace hapco::sim
