@@ -4,5 +4,5 @@ add_library(hapco::warnings ALIAS hapco_warnings)
 target_compile_options(hapco_warnings INTERFACE
   $<$<COMPILE_LANGUAGE:CXX>:-Wall -Wextra -Wpedantic -Wshadow -Wnon-virtual-dtor
                             -Wold-style-cast -Wcast-align -Woverloaded-virtual
-                            -Wnull-dereference -Wdouble-promotion -Wformat=2>
+                            -Wdouble-promotion -Wformat=2>
   $<$<BOOL:${HAPCO_WARNINGS_AS_ERRORS}>:-Werror>)

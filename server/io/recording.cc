@@ -1,0 +1,161 @@
+#include "io/recording.h"
+
+#include <array>
+#include <cstring>
+
+#include "common/error.h"
+
+namespace hapco::io {
+namespace {
+
+constexpr char kFileMagic[8] = {'H', 'A', 'P', 'C', 'O', 'R', 'E', 'C'};
+constexpr std::uint32_t kRecordMagic = 0x52435048u;  // "HPCR" little endian
+constexpr std::size_t kFrameBytes = 12;              // magic, length, crc
+constexpr std::uint32_t kMaxRecordBytes = 64u << 20;  // a sanity bound against damaged lengths
+
+std::array<std::uint32_t, 256> MakeCrcTable() {
+  std::array<std::uint32_t, 256> table{};
+  for (std::uint32_t i = 0; i < 256; ++i) {
+    std::uint32_t c = i;
+    for (int k = 0; k < 8; ++k) c = (c & 1u) ? 0xEDB88320u ^ (c >> 1) : c >> 1;
+    table[i] = c;
+  }
+  return table;
+}
+
+void PutU32(std::uint32_t value, char* out) {
+  for (int i = 0; i < 4; ++i) out[i] = static_cast<char>((value >> (8 * i)) & 0xFFu);
+}
+
+std::uint32_t GetU32(const char* in) {
+  std::uint32_t value = 0;
+  for (int i = 0; i < 4; ++i) value |= static_cast<std::uint32_t>(static_cast<unsigned char>(in[i])) << (8 * i);
+  return value;
+}
+
+}  // namespace
+
+std::uint32_t Crc32(const void* data, std::size_t size) {
+  static const std::array<std::uint32_t, 256> table = MakeCrcTable();
+  const auto* bytes = static_cast<const unsigned char*>(data);
+  std::uint32_t crc = 0xFFFFFFFFu;
+  for (std::size_t i = 0; i < size; ++i) crc = table[(crc ^ bytes[i]) & 0xFFu] ^ (crc >> 8);
+  return crc ^ 0xFFFFFFFFu;
+}
+
+RecordingWriter::RecordingWriter(const std::string& path, const recording::Header& header) : path_(path) {
+  file_ = std::fopen(path.c_str(), "wb");
+  if (file_ == nullptr) throw InputError("cannot create recording file " + path);
+  if (std::fwrite(kFileMagic, 1, sizeof(kFileMagic), file_) != sizeof(kFileMagic)) {
+    throw InputError("cannot write recording file " + path);
+  }
+  recording::Record record;
+  *record.mutable_header() = header;
+  Append(record);
+}
+
+RecordingWriter::~RecordingWriter() {
+  if (file_ != nullptr) std::fclose(file_);
+}
+
+void RecordingWriter::Append(const recording::Record& record) {
+  buffer_.clear();
+  if (!record.AppendToString(&buffer_)) throw InputError("cannot serialize a recording record");
+  char frame[kFrameBytes];
+  PutU32(kRecordMagic, frame);
+  PutU32(static_cast<std::uint32_t>(buffer_.size()), frame + 4);
+  PutU32(Crc32(buffer_.data(), buffer_.size()), frame + 8);
+  if (std::fwrite(frame, 1, kFrameBytes, file_) != kFrameBytes ||
+      std::fwrite(buffer_.data(), 1, buffer_.size(), file_) != buffer_.size() || std::fflush(file_) != 0) {
+    throw InputError("error writing recording file " + path_ + " (disk full?)");
+  }
+  ++records_written_;
+}
+
+void RecordingWriter::AppendStep(const recording::Step& step) {
+  recording::Record record;
+  *record.mutable_step() = step;
+  Append(record);
+}
+
+std::string RecordingReadReport::Summary() const {
+  std::string text = std::to_string(records) + " records";
+  if (damaged_records > 0) {
+    text += "; " + std::to_string(damaged_records) + " damaged records skipped (" +
+            std::to_string(skipped_bytes) + " bytes)";
+  }
+  if (torn_tail) text += "; torn tail of " + std::to_string(torn_tail_bytes) + " bytes ignored (writer stopped mid-record)";
+  return text;
+}
+
+std::vector<recording::Record> ReadRecording(const std::string& path, RecordingReadReport* report) {
+  std::string data;
+  {
+    std::unique_ptr<std::FILE, int (*)(std::FILE*)> file(std::fopen(path.c_str(), "rb"), &std::fclose);
+    if (!file) throw InputError("cannot open recording " + path);
+    char chunk[1 << 16];
+    std::size_t got = 0;
+    while ((got = std::fread(chunk, 1, sizeof(chunk), file.get())) > 0) data.append(chunk, got);
+  }
+  if (data.size() < sizeof(kFileMagic) || std::memcmp(data.data(), kFileMagic, sizeof(kFileMagic)) != 0) {
+    throw InputError(path + " is not a HapCo recording (missing the HAPCOREC magic)");
+  }
+  RecordingReadReport local;
+  std::vector<recording::Record> records;
+  std::size_t at = sizeof(kFileMagic);
+  // Resync: look for the next record magic after damage.
+  auto next_magic = [&](std::size_t from) {
+    for (std::size_t i = from; i + 4 <= data.size(); ++i) {
+      if (GetU32(data.data() + i) == kRecordMagic) return i;
+    }
+    return data.size();
+  };
+  while (at < data.size()) {
+    const std::size_t remaining = data.size() - at;
+    if (remaining < kFrameBytes) {
+      local.torn_tail = true;
+      local.torn_tail_bytes = static_cast<std::int64_t>(remaining);
+      break;
+    }
+    const std::uint32_t magic = GetU32(data.data() + at);
+    const std::uint32_t length = GetU32(data.data() + at + 4);
+    const std::uint32_t crc = GetU32(data.data() + at + 8);
+    if (magic != kRecordMagic || length > kMaxRecordBytes) {
+      const std::size_t next = next_magic(at + 1);
+      ++local.damaged_records;
+      local.skipped_bytes += static_cast<std::int64_t>(next - at);
+      at = next;
+      continue;
+    }
+    if (remaining < kFrameBytes + length) {
+      // Either the last record was cut short, or a damaged length points past the end: tell
+      // them apart by looking for a later record.
+      const std::size_t next = next_magic(at + 1);
+      if (next == data.size()) {
+        local.torn_tail = true;
+        local.torn_tail_bytes = static_cast<std::int64_t>(remaining);
+        break;
+      }
+      ++local.damaged_records;
+      local.skipped_bytes += static_cast<std::int64_t>(next - at);
+      at = next;
+      continue;
+    }
+    const char* payload = data.data() + at + kFrameBytes;
+    recording::Record record;
+    if (Crc32(payload, length) != crc || !record.ParseFromArray(payload, static_cast<int>(length))) {
+      const std::size_t next = next_magic(at + 1);
+      ++local.damaged_records;
+      local.skipped_bytes += static_cast<std::int64_t>(next - at);
+      at = next;
+      continue;
+    }
+    records.push_back(std::move(record));
+    at += kFrameBytes + length;
+  }
+  local.records = static_cast<std::int64_t>(records.size());
+  if (report != nullptr) *report = local;
+  return records;
+}
+
+}  // namespace hapco::io

@@ -1,0 +1,54 @@
+#pragma once
+// Recording files (proto/recording.proto): an append-only sequence of checksummed records.
+// Writing never rewrites what is already in the file; each record is flushed to the kernel as
+// it is written, so a writer killed with SIGKILL leaves every complete record readable.
+// Reading stops at a torn tail and resyncs past a damaged record, and says so.
+#include <cstdint>
+#include <cstdio>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "recording.pb.h"
+
+namespace hapco::io {
+
+// CRC-32 (IEEE 802.3, reflected, polynomial 0xEDB88320) of `size` bytes.
+std::uint32_t Crc32(const void* data, std::size_t size);
+
+class RecordingWriter {
+ public:
+  // Creates (truncates) the file and writes the file magic and the header record.
+  // Throws InputError if the file cannot be created.
+  RecordingWriter(const std::string& path, const recording::Header& header);
+  ~RecordingWriter();
+  RecordingWriter(const RecordingWriter&) = delete;
+  RecordingWriter& operator=(const RecordingWriter&) = delete;
+
+  // Appends one record and hands it to the kernel (fflush). Throws InputError on I/O errors.
+  void Append(const recording::Record& record);
+  void AppendStep(const recording::Step& step);
+  std::int64_t records_written() const { return records_written_; }
+
+ private:
+  std::FILE* file_ = nullptr;
+  std::string path_;
+  std::string buffer_;  // reused serialization buffer
+  std::int64_t records_written_ = 0;
+};
+
+struct RecordingReadReport {
+  std::int64_t records = 0;           // complete, checksum-valid records returned
+  std::int64_t damaged_records = 0;   // records skipped for a bad checksum or unparsable payload
+  std::int64_t skipped_bytes = 0;     // bytes skipped while resyncing past damage
+  bool torn_tail = false;             // the file ends inside a record (writer killed mid-write)
+  std::int64_t torn_tail_bytes = 0;
+  // One line for the user, e.g. "310 records; torn tail of 17 bytes ignored".
+  std::string Summary() const;
+};
+
+// Reads every complete record. Throws InputError if the file cannot be opened or does not
+// start with the recording magic (not a HapCo recording).
+std::vector<recording::Record> ReadRecording(const std::string& path, RecordingReadReport* report);
+
+}  // namespace hapco::io
