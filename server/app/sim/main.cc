@@ -3,7 +3,9 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <chrono>
 #include <filesystem>
+#include <iterator>
 #include <fstream>
 #include <memory>
 #include <string>
@@ -12,6 +14,7 @@
 #include "common/error.h"
 #include "common/timer.h"
 #include "io/scene_file.h"
+#include "io/recording.h"
 #include "io/vtk_export.h"
 #include "sim/step_pipeline.h"
 
@@ -36,6 +39,8 @@ detection, flexibility operator, frictional contact solve, force on the device.
   --vtk DIR         write ParaView files to DIR: deformed bodies and contact points every
                     --vtk-every steps (default 10) and at the last step; open DIR/hapco.pvd
   --vtk-every N     VTK output period in steps
+  --record FILE     write a HapCo recording (header with the scene, one record per step with
+                    forces, contact states and timings); read it with hapco-report
   --quiet           no progress line
   --help            this text
 
@@ -43,7 +48,7 @@ Exit code: 0 when every step converged, 2 when some did not (the run completes),
 )";
 
 struct Options {
-  std::string scene_path, csv_path, vtk_dir, solver_name, mode = "precomputed";
+  std::string scene_path, csv_path, vtk_dir, record_path, solver_name, mode = "precomputed";
   double tolerance_m = 0, friction = -1, rho_scale = 1;
   int max_iterations = 0, steps = 0, vtk_every = 10;
   bool cold = false, quiet = false;
@@ -102,6 +107,8 @@ Options Parse(int argc, char** argv) {
       options.steps = ParseInt("--steps", value());
     } else if (arg == "--csv") {
       options.csv_path = value();
+    } else if (arg == "--record") {
+      options.record_path = value();
     } else if (arg == "--vtk") {
       options.vtk_dir = value();
     } else if (arg == "--vtk-every") {
@@ -156,6 +163,54 @@ void WriteVtkStep(const std::string& dir, int step, const hapco::sim::TwoBodySes
   collection->Add(step, 2, name);
 }
 
+hapco::recording::Vec3 ToVec3(const Eigen::Vector3d& v) {
+  hapco::recording::Vec3 out;
+  out.set_x(v.x());
+  out.set_y(v.y());
+  out.set_z(v.z());
+  return out;
+}
+
+// One recording step: the step output plus every contact with its state.
+hapco::recording::Step MakeStepRecord(const hapco::sim::StepOutput& out, int phase,
+                                      const hapco::sim::TwoBodySession& session) {
+  hapco::recording::Step record;
+  record.set_step(static_cast<std::uint64_t>(out.step));
+  record.set_client_id("hapco-sim");
+  record.set_time_ns(std::chrono::duration_cast<std::chrono::nanoseconds>(
+                         std::chrono::steady_clock::now().time_since_epoch()).count());
+  *record.mutable_device_translation_m() = ToVec3(out.device_translation_m);
+  *record.mutable_contact_force_n() = ToVec3(out.contact_force_n);
+  *record.mutable_device_force_n() = ToVec3(out.device_force_n);
+  record.set_phase(static_cast<std::uint32_t>(phase));
+  record.set_solver_status(std::string(hapco::contact::StatusName(out.status)));
+  record.set_iterations(static_cast<std::uint32_t>(out.iterations));
+  record.set_inner_iterations(static_cast<std::uint32_t>(out.inner_iterations));
+  record.set_fc3d_error(out.fc3d_error);
+  record.set_solve_s(out.solve_seconds);
+  record.set_step_s(out.total_seconds);
+  record.set_separating(static_cast<std::uint32_t>(out.state_counts[0]));
+  record.set_sticking(static_cast<std::uint32_t>(out.state_counts[1]));
+  record.set_sliding(static_cast<std::uint32_t>(out.state_counts[2]));
+  const auto& result = session.last_result();
+  const double force_scale_n = result.force_n.size() > 0 ? result.force_n.cwiseAbs().maxCoeff() : 0.0;
+  for (std::size_t alpha = 0; alpha < session.contacts().size(); ++alpha) {
+    const auto& contact = session.contacts()[alpha];
+    const Eigen::Vector3d r = result.force_n.segment<3>(3 * static_cast<Eigen::Index>(alpha));
+    const Eigen::Vector3d u = result.displacement_m.segment<3>(3 * static_cast<Eigen::Index>(alpha));
+    auto* sample = record.add_contacts();
+    sample->set_id(static_cast<std::uint32_t>(contact.tool_node));
+    *sample->mutable_position_m() = ToVec3(contact.obstacle_point_m);
+    *sample->mutable_normal() = ToVec3(contact.frame.row(0).transpose());
+    *sample->mutable_force_n() = ToVec3(contact.frame.transpose() * r);
+    sample->set_gap_m(u[0]);
+    sample->set_slip_m(u.tail<2>().norm());
+    sample->set_state(static_cast<hapco::recording::ContactState>(hapco::contact::ClassifyContact(
+        r, u, 1e-9 * force_scale_n, session.parameters.global_tolerance_m)));
+  }
+  return record;
+}
+
 int Run(const Options& options) {
   hapco::sim::SceneSpec scene = hapco::io::LoadSceneFile(options.scene_path);
   if (options.friction >= 0) scene.friction_coefficient = options.friction;
@@ -190,6 +245,20 @@ int Run(const Options& options) {
                       "contacts,separating,sticking,sliding,outer_iterations,inner_iterations,"
                       "detect_s,assemble_s,solve_s,update_s,step_s,fc3d_error,paper_error_m,status\n");
   }
+  std::unique_ptr<hapco::io::RecordingWriter> recorder;
+  if (!options.record_path.empty()) {
+    hapco::recording::Header header;
+    header.set_format_version(1);
+    header.set_hapco_version(HAPCO_VERSION);
+    header.set_writer("hapco-sim");
+    header.set_scene_name(scene.name);
+    std::ifstream scene_file(options.scene_path);
+    header.set_scene_text(std::string(std::istreambuf_iterator<char>(scene_file), std::istreambuf_iterator<char>()));
+    header.set_created_unix_ns(std::chrono::duration_cast<std::chrono::nanoseconds>(
+                                   std::chrono::system_clock::now().time_since_epoch()).count());
+    header.set_solver(std::string(hapco::contact::SolverName(session.solver)));
+    recorder = std::make_unique<hapco::io::RecordingWriter>(options.record_path, header);
+  }
   std::unique_ptr<hapco::io::VtkCollection> collection;
   if (!options.vtk_dir.empty()) {
     std::error_code error;
@@ -220,6 +289,7 @@ int Run(const Options& options) {
                    out.fc3d_error, out.paper_error_m,
                    std::string(hapco::contact::StatusName(out.status)).c_str());
     }
+    if (recorder) recorder->AppendStep(MakeStepRecord(out, phase, session));
     if (collection && (step % options.vtk_every == 0 || step == steps)) {
       WriteVtkStep(options.vtk_dir, step, session, model, collection.get());
     }
@@ -231,6 +301,7 @@ int Run(const Options& options) {
   }
   if (progress) std::fputc('\n', stderr);
   if (csv != nullptr) std::fclose(csv);
+  if (recorder) std::printf("recording: %s (%lld records)\n", options.record_path.c_str(), static_cast<long long>(recorder->records_written()));
   if (collection) std::printf("ParaView: open %s/hapco.pvd\n", options.vtk_dir.c_str());
   std::printf("%d steps in %.2f s: peak contact force %.3f N, %ld outer iterations, %d not converged\n",
               steps, run.ElapsedSeconds(), peak_force_n, total_iterations, not_converged);

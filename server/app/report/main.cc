@@ -1,0 +1,146 @@
+// hapco-report: turns a HapCo recording into a summary, CSV and charts. Thin: reading is
+// hapco::io::ReadRecording, charts are scripts/plot_recording.py (matplotlib).
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <string>
+#include <vector>
+
+#include "common/error.h"
+#include "io/recording.h"
+
+namespace {
+
+constexpr const char* kUsage = R"(usage: hapco-report RECORDING [--csv FILE] [--plots DIR]
+
+Reads a HapCo recording (hapco-sim --record, hapco-recorder), prints what it holds and how it
+ends (a torn tail from a writer that was killed is skipped and reported), and optionally
+writes one CSV row per step and PNG charts: force over time, contacts by state over time,
+round-trip histogram (online recordings).
+
+  --csv FILE     steps as CSV (columns with units in the header)
+  --plots DIR    write force.png, contact_states.png, round_trip.png to DIR (needs
+                 /usr/bin/python3 with matplotlib; implies a CSV at DIR/steps.csv)
+  --help         this text
+
+Exit code: 0 on success, 1 on a missing/unreadable file or a file that is not a recording.
+)";
+
+std::string Quote(const std::string& text) { return "'" + text + "'"; }
+
+int Run(int argc, char** argv) {
+  std::string path, csv_path, plots_dir;
+  for (int i = 1; i < argc; ++i) {
+    const std::string arg = argv[i];
+    if (arg == "--help" || arg == "-h") {
+      std::fputs(kUsage, stdout);
+      return 0;
+    } else if (arg == "--csv" && i + 1 < argc) {
+      csv_path = argv[++i];
+    } else if (arg == "--plots" && i + 1 < argc) {
+      plots_dir = argv[++i];
+    } else if (!arg.empty() && arg[0] == '-') {
+      throw hapco::InputError("unknown option or missing value: " + arg + " (see --help)");
+    } else if (path.empty()) {
+      path = arg;
+    } else {
+      throw hapco::InputError("only one recording is accepted (see --help)");
+    }
+  }
+  if (path.empty()) throw hapco::InputError("missing RECORDING argument (see --help)");
+  hapco::io::RecordingReadReport report;
+  const auto records = hapco::io::ReadRecording(path, &report);
+  std::printf("recording  %s: %s\n", path.c_str(), report.Summary().c_str());
+  std::vector<const hapco::recording::Step*> steps;
+  for (const auto& record : records) {
+    if (record.has_header()) {
+      const auto& header = record.header();
+      std::printf("header     written by %s (HapCo %s), scene %s, solver %s\n", header.writer().c_str(),
+                  header.hapco_version().c_str(), header.scene_name().c_str(), header.solver().c_str());
+    } else if (record.has_step()) {
+      steps.push_back(&record.step());
+    }
+  }
+  double peak_force_n = 0, peak_device_n = 0;
+  long not_converged = 0, contacts[3] = {0, 0, 0};
+  std::vector<double> step_times, round_trips;
+  for (const auto* step : steps) {
+    const auto& f = step->contact_force_n();
+    const auto& d = step->device_force_n();
+    peak_force_n = std::max(peak_force_n, std::sqrt(f.x() * f.x() + f.y() * f.y() + f.z() * f.z()));
+    peak_device_n = std::max(peak_device_n, std::sqrt(d.x() * d.x() + d.y() * d.y() + d.z() * d.z()));
+    if (step->solver_status() != "converged") ++not_converged;
+    contacts[0] += step->separating();
+    contacts[1] += step->sticking();
+    contacts[2] += step->sliding();
+    step_times.push_back(step->step_s());
+    if (step->round_trip_s() > 0) round_trips.push_back(step->round_trip_s());
+  }
+  std::printf("steps      %zu; peak contact force %.3f N, peak device force %.3f N; %ld not converged\n",
+              steps.size(), peak_force_n, peak_device_n, not_converged);
+  std::printf("contacts   separating %ld, sticking %ld, sliding %ld (contact-steps)\n", contacts[0], contacts[1],
+              contacts[2]);
+  auto percentile = [](std::vector<double> values, double q) {
+    if (values.empty()) return 0.0;
+    std::sort(values.begin(), values.end());
+    return values[static_cast<std::size_t>(q * static_cast<double>(values.size() - 1))];
+  };
+  if (!step_times.empty()) {
+    std::printf("step time  p50 %.1f us, p99 %.1f us, max %.1f us\n", 1e6 * percentile(step_times, 0.5),
+                1e6 * percentile(step_times, 0.99), 1e6 * percentile(step_times, 1.0));
+  }
+  if (!round_trips.empty()) {
+    std::printf("round trip p50 %.1f us, p99 %.1f us, max %.1f us\n", 1e6 * percentile(round_trips, 0.5),
+                1e6 * percentile(round_trips, 0.99), 1e6 * percentile(round_trips, 1.0));
+  }
+  if (!plots_dir.empty() && csv_path.empty()) csv_path = plots_dir + "/steps.csv";
+  if (!plots_dir.empty()) {
+    if (std::system(("mkdir -p " + Quote(plots_dir)).c_str()) != 0) {
+      throw hapco::InputError("cannot create " + plots_dir);
+    }
+  }
+  if (!csv_path.empty()) {
+    std::FILE* csv = std::fopen(csv_path.c_str(), "w");
+    if (csv == nullptr) throw hapco::InputError("cannot write " + csv_path);
+    std::fprintf(csv, "step,client_id,time_ns,dx_m,dy_m,dz_m,fx_n,fy_n,fz_n,device_fx_n,device_fy_n,device_fz_n,"
+                      "separating,sticking,sliding,iterations,solver_status,solve_s,step_s,round_trip_s\n");
+    for (const auto* s : steps) {
+      std::fprintf(csv, "%llu,%s,%lld,%.9g,%.9g,%.9g,%.12g,%.12g,%.12g,%.12g,%.12g,%.12g,%u,%u,%u,%u,%s,%.6g,%.6g,%.6g\n",
+                   static_cast<unsigned long long>(s->step()), s->client_id().c_str(),
+                   static_cast<long long>(s->time_ns()), s->device_translation_m().x(), s->device_translation_m().y(),
+                   s->device_translation_m().z(), s->contact_force_n().x(), s->contact_force_n().y(),
+                   s->contact_force_n().z(), s->device_force_n().x(), s->device_force_n().y(), s->device_force_n().z(),
+                   s->separating(), s->sticking(), s->sliding(), s->iterations(), s->solver_status().c_str(),
+                   s->solve_s(), s->step_s(), s->round_trip_s());
+    }
+    std::fclose(csv);
+    std::printf("csv        %s\n", csv_path.c_str());
+  }
+  if (!plots_dir.empty()) {
+    const char* env = std::getenv("HAPCO_SCRIPTS_DIR");
+    const std::string scripts = env != nullptr ? env : HAPCO_DEFAULT_SCRIPTS_DIR;
+    const std::string command = "/usr/bin/python3 " + Quote(scripts + "/plot_recording.py") + " " + Quote(csv_path) +
+                                " " + Quote(plots_dir);
+    std::fflush(stdout);  // keep our lines before the script's
+    if (std::system(command.c_str()) != 0) {
+      throw hapco::InputError("chart script failed: " + command + " (is python3-matplotlib installed?)");
+    }
+  }
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  try {
+    return Run(argc, argv);
+  } catch (const hapco::InputError& error) {
+    std::fprintf(stderr, "hapco-report: %s\n", error.what());
+    return 1;
+  } catch (const std::exception& error) {
+    std::fprintf(stderr, "hapco-report: unexpected error: %s\n", error.what());
+    return 3;
+  }
+}
