@@ -132,6 +132,67 @@ double ComputeRho(const ContactProblem& problem, const SolverParameters& p,
   return rho_min;
 }
 
+// The local Uzawa inner loop of one contact (paper 3.3.1, algorithms.md §4) on scalars:
+//     u = A r + q,  r ← Proj_Kμ(r − ρ (u + μ‖u_t‖ n)),  until ‖Δr‖/ρ < ε₂ or max_steps.
+// Same formulas as UzawaPredictorCorrector / ProjectOnCoulombCone (algorithms.md §3), inlined
+// with sqrt instead of hypot (forces and displacements are far from overflow) and the stop
+// test squared (‖Δr‖² < (ρ ε₂)², no sqrt or division per step). *r holds the start on entry
+// and the last iterate on exit; returns whether ε₂ was met (false also on NaN).
+bool LocalUzawaInner(const Eigen::Matrix3d& a, const Eigen::Vector3d& q, double mu, double rho,
+                     double tolerance_m, int max_steps, Eigen::Vector3d* r, int* steps) {
+  const double a00 = a(0, 0), a01 = a(0, 1), a02 = a(0, 2);
+  const double a10 = a(1, 0), a11 = a(1, 1), a12 = a(1, 2);
+  const double a20 = a(2, 0), a21 = a(2, 1), a22 = a(2, 2);
+  const double q0 = q(0), q1 = q(1), q2 = q(2);
+  const double tol_n = rho * tolerance_m;
+  const double tol2 = tol_n * tol_n;
+  const double mu2p1 = 1.0 + mu * mu;
+  double r0 = (*r)(0), r1 = (*r)(1), r2 = (*r)(2);
+  bool met = false;
+  int j = 0;
+  while (j < max_steps) {
+    const double u0 = a00 * r0 + a01 * r1 + a02 * r2 + q0;
+    const double u1 = a10 * r0 + a11 * r1 + a12 * r2 + q1;
+    const double u2 = a20 * r0 + a21 * r1 + a22 * r2 + q2;
+    // Predictor r* = r − ρ (u + μ‖u_t‖ n).
+    const double sn = r0 - rho * (u0 + mu * std::sqrt(u1 * u1 + u2 * u2));
+    const double s1 = r1 - rho * u1;
+    const double s2 = r2 - rho * u2;
+    // Corrector: projection on K_μ (cases of algorithms.md §3).
+    const double at = std::sqrt(s1 * s1 + s2 * s2);
+    double n0, n1, n2;
+    if (sn >= 0.0 && at <= mu * sn) {  // inside: sticking
+      n0 = sn;
+      n1 = s1;
+      n2 = s2;
+    } else if (mu * at <= -sn) {  // polar cone: separating
+      n0 = 0.0;
+      n1 = 0.0;
+      n2 = 0.0;
+    } else {  // boundary: sliding
+      n0 = (sn + mu * at) / mu2p1;
+      const double scale = at > 0.0 ? mu * n0 / at : 0.0;
+      n1 = scale * s1;
+      n2 = scale * s2;
+    }
+    ++j;
+    const double d0 = n0 - r0, d1 = n1 - r1, d2 = n2 - r2;
+    const double step2 = d0 * d0 + d1 * d1 + d2 * d2;
+    r0 = n0;
+    r1 = n1;
+    r2 = n2;
+    if (!(step2 >= tol2)) {  // also stops on NaN (caught by the caller)
+      met = step2 < tol2;
+      break;
+    }
+  }
+  (*r)(0) = r0;
+  (*r)(1) = r1;
+  (*r)(2) = r2;
+  *steps = j;
+  return met;
+}
+
 // One Gauss-Seidel sweep (paper 3.3.1 / 3.3.2, or exact local solves). Updates r and u in
 // place; returns Σ ‖Δr_α‖²/ρ_α², adds the local iteration count to *inner and the number of
 // local Uzawa loops stopped by max_inner_iterations to *inner_limit_hits.
@@ -160,24 +221,15 @@ double GaussSeidelSweep(SolverKind kind, const ContactProblem& problem,
       case SolverKind::kLocalUzawa: {
         // Paper 3.3.1 inner loop: predictor, corrector, back-up u = W_αα r + ᵅᵝu + ũ_α,
         // until ‖Δr_α‖/ρ < ε₂. Started from the current r_α rather than the paper's 0, so
-        // that a warm start carries through the inner loop too.
-        Eigen::Vector3d rj = r_old;
-        bool met = false;
-        for (int j = 0; j < p.max_inner_iterations; ++j) {
-          const Eigen::Vector3d uj = waa * rj + q;
-          const Eigen::Vector3d next = UzawaPredictorCorrector(rj, uj, mu, rho_a);
-          *inner += 1;
-          const double step_m = (next - rj).norm() / rho_a;
-          rj = next;
-          if (!(step_m >= p.local_tolerance_m)) {  // also stops on NaN (caught by the caller)
-            met = step_m < p.local_tolerance_m;
-            break;
-          }
-        }
+        // that a warm start carries through the inner loop too. The loop runs on scalars in
+        // registers (LocalUzawaInner): it dominates the sweep for small m.
+        int steps = 0;
+        const bool met = LocalUzawaInner(waa, q, mu, rho_a, p.local_tolerance_m,
+                                         p.max_inner_iterations, &r_new, &steps);
+        *inner += steps;
         // An inner loop cut by the cap may even end where it started (a 2-cycle when ρ is
         // too large), which would fool the outer test ‖Δr‖/ρ < ε₁: count it.
         if (!met) *inner_limit_hits += 1;
-        r_new = rj;
         break;
       }
       case SolverKind::kReferenceNsgs:
