@@ -92,7 +92,7 @@ TEST_P(PipelineOrderTest, ContactForceBalancesTheFemReactions) {
 
 INSTANTIATE_TEST_SUITE_P(BothOrders, PipelineOrderTest,
                          ::testing::Values(fem::ElementOrder::kTet4, fem::ElementOrder::kTet10),
-                         [](const auto& info) { return std::string(fem::ToString(info.param)); });
+                         [](const auto& test_info) { return std::string(fem::ToString(test_info.param)); });
 
 // Every contact force lies in its Coulomb cone, so the resultant does too, and the gap closes
 // (u_n >= 0 up to the tolerance).
