@@ -1,6 +1,8 @@
 #!/usr/bin/python3
 """usage: check_sim_csv.py FILE STEPS — one row per step, finite values, every step converged,
-a force that grows while pressing and vanishes after the final lift."""
+a force that grows while pressing and vanishes after the final lift (back at the start height
+the exact force is zero; the solver's stop test leaves a residual, allowed up to 1e-4 of the
+peak force)."""
 import csv
 import math
 import sys
@@ -19,7 +21,8 @@ press = [float(r["fz_n"]) for r in rows if r["phase"] == "press"]
 if not all(b > a for a, b in zip(press, press[1:])):
     raise SystemExit("the normal force does not grow monotonically while pressing")
 last = rows[-1]
-if math.hypot(float(last["fx_n"]), float(last["fy_n"]), float(last["fz_n"])) > 1e-9:
+peak = max(math.hypot(float(r["fx_n"]), float(r["fy_n"]), float(r["fz_n"])) for r in rows)
+if math.hypot(float(last["fx_n"]), float(last["fy_n"]), float(last["fz_n"])) > 1e-4 * peak:
     raise SystemExit(f"force after the lift is not zero: {last['fx_n']} {last['fy_n']} {last['fz_n']}")
 print(f"{len(rows)} steps, peak fz {max(float(r['fz_n']) for r in rows):.3f} N")
 print("ok")
