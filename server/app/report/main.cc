@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "common/cli.h"
 #include "common/error.h"
 #include "io/recording.h"
 
@@ -134,13 +135,5 @@ int Run(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  try {
-    return Run(argc, argv);
-  } catch (const hapco::InputError& error) {
-    std::fprintf(stderr, "hapco-report: %s\n", error.what());
-    return 1;
-  } catch (const std::exception& error) {
-    std::fprintf(stderr, "hapco-report: unexpected error: %s\n", error.what());
-    return 3;
-  }
+  return hapco::cli::RunMain("hapco-report", [&] { return Run(argc, argv); });
 }

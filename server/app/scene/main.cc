@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "common/cli.h"
 #include "common/error.h"
 #include "common/memory.h"
 #include "common/timer.h"
@@ -131,13 +132,5 @@ int Run(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  try {
-    return Run(argc, argv);
-  } catch (const hapco::InputError& error) {
-    std::fprintf(stderr, "hapco-scene: %s\n", error.what());
-    return 1;
-  } catch (const std::exception& error) {
-    std::fprintf(stderr, "hapco-scene: unexpected error: %s\n", error.what());
-    return 3;
-  }
+  return hapco::cli::RunMain("hapco-scene", [&] { return Run(argc, argv); });
 }

@@ -11,6 +11,7 @@
 #include <string>
 #include <unistd.h>
 
+#include "common/cli.h"
 #include "common/error.h"
 #include "common/timer.h"
 #include "io/scene_file.h"
@@ -54,24 +55,6 @@ struct Options {
   bool cold = false, quiet = false;
 };
 
-double ParseDouble(const char* flag, const char* text) {
-  char* end = nullptr;
-  const double value = std::strtod(text, &end);
-  if (end == text || *end != '\0' || !std::isfinite(value)) {
-    throw hapco::InputError(std::string(flag) + " expects a number, got '" + text + "'");
-  }
-  return value;
-}
-
-int ParseInt(const char* flag, const char* text) {
-  char* end = nullptr;
-  const long value = std::strtol(text, &end, 10);
-  if (end == text || *end != '\0' || value < 1 || value > 100000000) {
-    throw hapco::InputError(std::string(flag) + " expects a positive integer, got '" + text + "'");
-  }
-  return static_cast<int>(value);
-}
-
 Options Parse(int argc, char** argv) {
   Options options;
   for (int i = 1; i < argc; ++i) {
@@ -86,15 +69,15 @@ Options Parse(int argc, char** argv) {
     } else if (arg == "--solver") {
       options.solver_name = value();
     } else if (arg == "--tol") {
-      options.tolerance_m = ParseDouble("--tol", value());
+      options.tolerance_m = hapco::cli::ParseDouble("--tol", value());
       if (options.tolerance_m <= 0) throw hapco::InputError("--tol must be > 0 m");
     } else if (arg == "--mu") {
-      options.friction = ParseDouble("--mu", value());
+      options.friction = hapco::cli::ParseDouble("--mu", value());
       if (options.friction < 0) throw hapco::InputError("--mu must be >= 0");
     } else if (arg == "--max-iter") {
-      options.max_iterations = ParseInt("--max-iter", value());
+      options.max_iterations = static_cast<int>(hapco::cli::ParseInteger("--max-iter", value(), 1, 100000000));
     } else if (arg == "--rho-scale") {
-      options.rho_scale = ParseDouble("--rho-scale", value());
+      options.rho_scale = hapco::cli::ParseDouble("--rho-scale", value());
       if (options.rho_scale <= 0) throw hapco::InputError("--rho-scale must be > 0");
     } else if (arg == "--cold") {
       options.cold = true;
@@ -104,7 +87,7 @@ Options Parse(int argc, char** argv) {
         throw hapco::InputError("--mode must be precomputed or full, got '" + options.mode + "'");
       }
     } else if (arg == "--steps") {
-      options.steps = ParseInt("--steps", value());
+      options.steps = static_cast<int>(hapco::cli::ParseInteger("--steps", value(), 1, 100000000));
     } else if (arg == "--csv") {
       options.csv_path = value();
     } else if (arg == "--record") {
@@ -112,7 +95,7 @@ Options Parse(int argc, char** argv) {
     } else if (arg == "--vtk") {
       options.vtk_dir = value();
     } else if (arg == "--vtk-every") {
-      options.vtk_every = ParseInt("--vtk-every", value());
+      options.vtk_every = static_cast<int>(hapco::cli::ParseInteger("--vtk-every", value(), 1, 100000000));
     } else if (arg == "--quiet") {
       options.quiet = true;
     } else if (!arg.empty() && arg[0] == '-') {
@@ -311,13 +294,5 @@ int Run(const Options& options) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  try {
-    return Run(Parse(argc, argv));
-  } catch (const hapco::InputError& error) {
-    std::fprintf(stderr, "hapco-sim: %s\n", error.what());
-    return 1;
-  } catch (const std::exception& error) {
-    std::fprintf(stderr, "hapco-sim: unexpected error: %s\n", error.what());
-    return 3;
-  }
+  return hapco::cli::RunMain("hapco-sim", [&] { return Run(Parse(argc, argv)); });
 }

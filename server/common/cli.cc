@@ -1,0 +1,43 @@
+#include "common/cli.h"
+
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <string>
+
+#include "common/error.h"
+
+namespace hapco::cli {
+
+double ParseDouble(std::string_view flag, const char* text) {
+  char* end = nullptr;
+  const double value = std::strtod(text, &end);
+  if (end == text || *end != '\0' || !std::isfinite(value)) {
+    throw InputError(std::string(flag) + " expects a number, got '" + text + "'");
+  }
+  return value;
+}
+
+long ParseInteger(std::string_view flag, const char* text, long minimum, long maximum) {
+  char* end = nullptr;
+  const long value = std::strtol(text, &end, 10);
+  if (end == text || *end != '\0' || value < minimum || value > maximum) {
+    throw InputError(std::string(flag) + " expects an integer in [" + std::to_string(minimum) + ", " +
+                     std::to_string(maximum) + "], got '" + text + "'");
+  }
+  return value;
+}
+
+int RunMain(const char* tool, const std::function<int()>& body) {
+  try {
+    return body();
+  } catch (const InputError& error) {
+    std::fprintf(stderr, "%s: %s\n", tool, error.what());
+    return 1;
+  } catch (const std::exception& error) {
+    std::fprintf(stderr, "%s: unexpected error: %s\n", tool, error.what());
+    return 3;
+  }
+}
+
+}  // namespace hapco::cli

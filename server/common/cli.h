@@ -1,0 +1,18 @@
+#pragma once
+// Small helpers shared by the thin executables (design.md, example 14): flag values parsed
+// with messages that say what to fix, and one boundary that turns errors into exit codes.
+#include <functional>
+#include <string_view>
+
+namespace hapco::cli {
+
+// A finite number, else InputError "FLAG expects a number, got 'TEXT'".
+double ParseDouble(std::string_view flag, const char* text);
+// An integer in [minimum, maximum], else InputError naming the flag and the range.
+long ParseInteger(std::string_view flag, const char* text, long minimum, long maximum);
+
+// Runs `body` and returns its exit code; an InputError prints "TOOL: message" on stderr and
+// returns 1, any other exception "TOOL: unexpected error: ..." and returns 3.
+int RunMain(const char* tool, const std::function<int()>& body);
+
+}  // namespace hapco::cli
