@@ -1,0 +1,85 @@
+#include "phantom.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "common/error.h"
+
+namespace hapco::phantom {
+
+Eigen::Vector3d Quantize(const Eigen::Vector3d& position_m, double quantum_m) {
+  HAPCO_ASSERT(quantum_m > 0, "Quantize: quantum must be > 0");
+  Eigen::Vector3d out;
+  for (int i = 0; i < 3; ++i) out[i] = std::round(position_m[i] / quantum_m) * quantum_m;
+  return out;
+}
+
+SafetyFilter::SafetyFilter(const SafetyParameters& parameters) : parameters_(parameters) {
+  HAPCO_ASSERT(parameters.max_force_n > 0 && parameters.max_change_per_tick_n > 0 &&
+                   parameters.timeout_s > 0 && parameters.ramp_s > 0 && parameters.tick_s > 0,
+               "SafetyFilter: parameters must be > 0");
+}
+
+Eigen::Vector3d SafetyFilter::Update(bool fresh, const Eigen::Vector3d& raw_n, double now_s) {
+  if (fresh && !raw_n.allFinite()) {
+    ++rejected_non_finite_;
+    fresh = false;  // a NaN is no news: keep the last good target
+  }
+  if (fresh) {
+    Eigen::Vector3d target = raw_n;
+    const double magnitude = target.norm();
+    if (magnitude > parameters_.max_force_n) {
+      target *= parameters_.max_force_n / magnitude;
+      ++clamped_;
+    }
+    target_n_ = target;
+    last_fresh_s_ = now_s;
+    have_fresh_ = true;
+    stale_ = false;
+  } else if (have_fresh_ && !stale_ && now_s - last_fresh_s_ > parameters_.timeout_s) {
+    // Timeout: ramp from the force rendered now to zero in ramp_s (linear in magnitude).
+    stale_ = true;
+    const double ticks = std::max(1.0, parameters_.ramp_s / parameters_.tick_s);
+    ramp_step_n_ = rendered_.norm() / ticks;
+    target_n_.setZero();
+  }
+  if (stale_) ++stale_ticks_;
+  double max_step = parameters_.max_change_per_tick_n;
+  if (stale_) max_step = std::min(max_step, std::max(ramp_step_n_, 1e-12));
+  const Eigen::Vector3d delta = target_n_ - rendered_;
+  const double delta_norm = delta.norm();
+  if (delta_norm > max_step) {
+    rendered_ += delta * (max_step / delta_norm);
+  } else {
+    rendered_ = target_n_;
+  }
+  return rendered_;
+}
+
+HandModel::HandModel(const HandParameters& parameters, const Eigen::Vector3d& start_m)
+    : parameters_(parameters), position_m_(start_m) {
+  HAPCO_ASSERT(parameters.device_mass_kg > 0, "HandModel: mass must be > 0");
+}
+
+const Eigen::Vector3d& HandModel::Step(const Eigen::Vector3d& target_m,
+                                       const Eigen::Vector3d& target_velocity_m_per_s,
+                                       const Eigen::Vector3d& rendered_force_n, double dt_s) {
+  const Eigen::Vector3d force_n =
+      parameters_.hand_stiffness_n_per_m * (target_m - position_m_) +
+      parameters_.hand_damping_n_s_per_m * (target_velocity_m_per_s - velocity_m_per_s_) -
+      parameters_.device_damping_n_s_per_m * velocity_m_per_s_ + rendered_force_n;
+  velocity_m_per_s_ += dt_s / parameters_.device_mass_kg * force_n;
+  position_m_ += dt_s * velocity_m_per_s_;
+  return position_m_;
+}
+
+double Quantile(std::vector<double>* values, double p) {
+  if (values->empty()) return 0.0;
+  const double clamped = std::clamp(p, 0.0, 1.0);
+  auto index = static_cast<std::size_t>(std::ceil(clamped * static_cast<double>(values->size())));
+  index = index == 0 ? 0 : index - 1;
+  std::nth_element(values->begin(), values->begin() + static_cast<std::ptrdiff_t>(index), values->end());
+  return (*values)[index];
+}
+
+}  // namespace hapco::phantom

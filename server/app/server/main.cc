@@ -1,0 +1,206 @@
+// hapco-server: the haptic service. Loads one scene (the TwoBodyModel is shared), serves any
+// number of clients over DDS (one TwoBodySession each), one step per pose. Thin: the work is
+// in hapco::service::ServerLoop and Session.
+#include <pthread.h>
+#include <sched.h>
+#include <signal.h>
+#include <unistd.h>
+
+#include <cerrno>
+
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <memory>
+#include <string>
+#include <thread>
+
+#include "common/error.h"
+#include "common/timer.h"
+#include "io/scene_file.h"
+#include "service/server_loop.h"
+#include "sim/two_body_model.h"
+
+namespace {
+
+constexpr const char* kUsage = R"(usage: hapco-server SCENE.txtpb [options]
+
+Serves haptic sessions over DDS: every client publishes DevicePose samples ("hapco/pose",
+1 kHz); the server runs one contact step per pose on the client's own session of SCENE and
+answers with a FeedbackForce on partition hapco/client/<id> (docs/dds-qos.md). A session
+opens on a SESSION_JOIN or on the client's first valid pose. Bad input is counted and logged
+(at most one line per second per kind), never fatal.
+
+  --domain N          DDS domain id (default 0); the configuration comes from CYCLONEDDS_URI
+                      (loopback: CYCLONEDDS_URI=file://.../docker/cyclonedds-loopback.xml)
+  --status-period S   ServerStatus period, s (default 1)
+  --max-sessions N    open sessions at most (default 16); further clients are refused
+  --max-jump-m X      largest plausible position change per pose, m (default 0.002);
+                      a larger jump is ignored (the client keeps its last force)
+  --workspace-m X     poses with |position| > X m are ignored (default 0.1)
+  --trace FILE        write one CSV row per step (client_id, sequence, position, force sent,
+                      step time) for debugging and tests
+  --rt-priority N     run the server thread (and DDS's threads) with SCHED_FIFO priority N
+                      (1..99; needs CAP_SYS_NICE; default 0 = normal policy)
+  --quiet             no log lines (the exit summary is still printed)
+  --help              this text
+
+SIGINT/SIGTERM: clean shutdown, exit code 0 and a one-line summary.
+Exit code: 0 after a clean shutdown, 1 on bad input (scene file, flags), 3 on a DDS failure.
+)";
+
+struct Options {
+  std::string scene_path, trace_path;
+  int domain = 0;
+  int rt_priority = 0;
+  hapco::service::ServerOptions server;
+};
+
+double ParsePositive(const char* flag, const char* text) {
+  char* end = nullptr;
+  const double value = std::strtod(text, &end);
+  if (end == text || *end != '\0' || !std::isfinite(value) || value <= 0) {
+    throw hapco::InputError(std::string(flag) + " expects a number > 0, got '" + text + "'");
+  }
+  return value;
+}
+
+int ParseInt(const char* flag, const char* text, long low, long high) {
+  char* end = nullptr;
+  const long value = std::strtol(text, &end, 10);
+  if (end == text || *end != '\0' || value < low || value > high) {
+    throw hapco::InputError(std::string(flag) + " expects an integer in [" + std::to_string(low) + ", " +
+                            std::to_string(high) + "], got '" + text + "'");
+  }
+  return static_cast<int>(value);
+}
+
+Options Parse(int argc, char** argv) {
+  Options options;
+  for (int i = 1; i < argc; ++i) {
+    const std::string arg = argv[i];
+    auto value = [&]() -> const char* {
+      if (i + 1 >= argc) throw hapco::InputError(arg + " needs a value (see --help)");
+      return argv[++i];
+    };
+    if (arg == "--help" || arg == "-h") {
+      std::fputs(kUsage, stdout);
+      std::exit(0);
+    } else if (arg == "--domain") {
+      options.domain = ParseInt("--domain", value(), 0, 230);
+    } else if (arg == "--status-period") {
+      options.server.status_period_s = ParsePositive("--status-period", value());
+    } else if (arg == "--max-sessions") {
+      options.server.max_sessions = ParseInt("--max-sessions", value(), 1, 1000);
+    } else if (arg == "--max-jump-m") {
+      options.server.limits.max_jump_m = ParsePositive("--max-jump-m", value());
+    } else if (arg == "--workspace-m") {
+      options.server.limits.workspace_m = ParsePositive("--workspace-m", value());
+    } else if (arg == "--rt-priority") {
+      options.rt_priority = ParseInt("--rt-priority", value(), 0, 99);
+    } else if (arg == "--trace") {
+      options.trace_path = value();
+    } else if (arg == "--quiet") {
+      options.server.log = false;
+    } else if (!arg.empty() && arg[0] == '-') {
+      throw hapco::InputError("unknown option " + arg + " (see --help)");
+    } else if (options.scene_path.empty()) {
+      options.scene_path = arg;
+    } else {
+      throw hapco::InputError("only one scene file is accepted (see --help)");
+    }
+  }
+  if (options.scene_path.empty()) throw hapco::InputError("missing SCENE argument (see --help)");
+  return options;
+}
+
+// SCHED_FIFO at `priority` for the calling thread, before the DDS participant exists so that
+// Cyclone's threads inherit it (platform-notes.md: chrt -f 80 cut the max round trip from
+// ~12 ms to ~1.4 ms on the shared machine). Without the privilege: a warning, normal policy.
+void UseRealtimePriority(int priority, const char* program) {
+  if (priority <= 0) return;
+  sched_param param{};
+  param.sched_priority = priority;
+  const int rc = pthread_setschedparam(pthread_self(), SCHED_FIFO, &param);
+  if (rc != 0) {
+    std::fprintf(stderr, "%s: SCHED_FIFO %d not available (%s); running with the normal policy\n", program,
+                 priority, std::strerror(rc));
+  }
+}
+
+// Self-pipe: the handler only write()s the signal number (async-signal-safe); a thread
+// reads it and wakes the server's WaitSet. (Blocking the signals instead is not enough:
+// a thread created before main() - a library's - would still take the default action.)
+int g_signal_pipe[2] = {-1, -1};
+
+extern "C" void OnShutdownSignal(int signal) {
+  const unsigned char value = static_cast<unsigned char>(signal);
+  const ssize_t ignored = write(g_signal_pipe[1], &value, 1);
+  (void)ignored;
+}
+
+int Run(const Options& options) {
+  if (pipe(g_signal_pipe) != 0) throw std::runtime_error("pipe() failed");
+  struct sigaction action {};
+  action.sa_handler = &OnShutdownSignal;
+  sigemptyset(&action.sa_mask);
+  action.sa_flags = SA_RESTART;
+  sigaction(SIGINT, &action, nullptr);
+  sigaction(SIGTERM, &action, nullptr);
+
+  hapco::Stopwatch setup;
+  const hapco::sim::SceneSpec scene = hapco::io::LoadSceneFile(options.scene_path);
+  const hapco::sim::TwoBodyModel model(scene);
+  hapco::service::ServerOptions server_options = options.server;
+  std::unique_ptr<std::FILE, int (*)(std::FILE*)> trace(nullptr, &std::fclose);
+  if (!options.trace_path.empty()) {
+    trace.reset(std::fopen(options.trace_path.c_str(), "w"));
+    if (!trace) throw hapco::InputError("cannot write " + options.trace_path);
+    std::fprintf(trace.get(), "client_id,sequence,x_m,y_m,z_m,fx_n,fy_n,fz_n,step_us\n");
+    server_options.trace = trace.get();
+  }
+  UseRealtimePriority(options.rt_priority, "hapco-server");
+  hapco::service::ServerLoop server(model, options.domain, server_options);
+  std::printf("hapco-server: scene %s (%zu tool candidate nodes), domain %d, ready in %.2f s\n",
+              scene.name.c_str(), model.tool_candidates().size(), options.domain, setup.ElapsedSeconds());
+  std::fflush(stdout);
+
+  int received = 0;
+  std::thread waiter([&] {
+    unsigned char value = 0;
+    while (read(g_signal_pipe[0], &value, 1) < 0 && errno == EINTR) {
+    }
+    received = value;  // 0: woken by the main thread (the server loop ended on its own)
+    server.RequestStop();
+  });
+  auto stop_waiter = [&] {
+    const unsigned char zero = 0;
+    if (write(g_signal_pipe[1], &zero, 1) != 1) std::perror("hapco-server: write");
+    waiter.join();
+  };
+  try {
+    server.Run();
+  } catch (...) {
+    stop_waiter();
+    throw;
+  }
+  stop_waiter();
+  std::printf("%s; stopped by %s\n", server.Summary().c_str(),
+              received == SIGINT ? "SIGINT" : received == SIGTERM ? "SIGTERM" : "request");
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  try {
+    return Run(Parse(argc, argv));
+  } catch (const hapco::InputError& error) {
+    std::fprintf(stderr, "hapco-server: %s\n", error.what());
+    return 1;
+  } catch (const std::exception& error) {
+    std::fprintf(stderr, "hapco-server: unexpected error: %s\n", error.what());
+    return 3;
+  }
+}

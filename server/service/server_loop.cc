@@ -1,0 +1,337 @@
+#include "service/server_loop.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <ctime>
+
+#include "common/error.h"
+
+namespace hapco::service {
+namespace {
+
+int64_t NowNs() {
+  timespec ts{};
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000LL + ts.tv_nsec;
+}
+
+constexpr dds_attach_t kPoseToken = 1;
+constexpr dds_attach_t kSessionToken = 2;
+enum LogKind { kLogBadPose = 0, kLogClient = 1, kLogSession = 2, kLogFailure = 3, kLogKinds = 4 };
+
+const char* VerdictName(PoseVerdict verdict) {
+  switch (verdict) {
+    case PoseVerdict::kAccept: return "accepted";
+    case PoseVerdict::kNonFinite: return "non-finite pose";
+    case PoseVerdict::kOutOfWorkspace: return "pose out of workspace";
+    case PoseVerdict::kJump: return "position jump";
+    case PoseVerdict::kOutOfOrder: return "out-of-order sequence";
+    case PoseVerdict::kDuplicate: return "repeated sequence";
+    case PoseVerdict::kFlood: return "pose flood";
+  }
+  return "?";
+}
+
+// Checks that need no session state (used before a session exists).
+PoseVerdict CheckStateless(const hapco_idl_DevicePose& pose, const PoseLimits& limits) {
+  const Eigen::Vector3d p(pose.position_m.x, pose.position_m.y, pose.position_m.z);
+  const auto& q = pose.orientation;
+  if (!p.allFinite() || !std::isfinite(q.w) || !std::isfinite(q.x) || !std::isfinite(q.y) ||
+      !std::isfinite(q.z)) {
+    return PoseVerdict::kNonFinite;
+  }
+  if (p.norm() > limits.workspace_m) return PoseVerdict::kOutOfWorkspace;
+  return PoseVerdict::kAccept;
+}
+
+// The id in a string<64> field, bounded even without a terminator.
+std::string IdOf(const char (&field)[65]) { return std::string(field, strnlen(field, 65)); }
+
+bool ValidId(const std::string& id) {
+  try {
+    ValidateClientId(id);
+    return true;
+  } catch (const InputError&) {
+    return false;
+  }
+}
+
+double Percentile(std::vector<double>* values, double p) {
+  if (values->empty()) return 0.0;
+  auto index = static_cast<std::size_t>(std::ceil(p * static_cast<double>(values->size())));
+  index = index == 0 ? 0 : index - 1;
+  std::nth_element(values->begin(), values->begin() + static_cast<std::ptrdiff_t>(index), values->end());
+  return (*values)[index];
+}
+
+}  // namespace
+
+ServerLoop::ServerLoop(const sim::TwoBodyModel& model, dds_domainid_t domain_id,
+                       const ServerOptions& options)
+    : model_(model),
+      options_(options),
+      participant_(domain_id),
+      pose_topic_(participant_),
+      session_topic_(participant_),
+      status_topic_(participant_),
+      force_topic_(participant_),
+      contact_topic_(participant_),
+      subscriber_(participant_),
+      publisher_(participant_),
+      // Reader history 4 per client (the writers keep 1): poses that arrive while the server
+      // is busy are taken and counted as superseded instead of vanishing in the reader.
+      pose_reader_(subscriber_, pose_topic_, PoseQos().KeepLast(4)),
+      session_reader_(subscriber_, session_topic_),
+      status_writer_(publisher_, status_topic_),
+      waitset_(participant_),
+      last_log_ns_(kLogKinds, 0),
+      suppressed_logs_(kLogKinds, 0) {
+  if (options_.status_period_s <= 0) throw InputError("status period must be > 0 s");
+  if (options_.max_sessions < 1) throw InputError("max sessions must be >= 1");
+  waitset_.Attach(pose_reader_.data_condition(), kPoseToken);
+  waitset_.Attach(session_reader_.data_condition(), kSessionToken);
+  step_times_us_.reserve(8192);
+  start_ns_ = NowNs();
+}
+
+ServerLoop::~ServerLoop() {
+  // Sessions own publishers of participant_: drop them before the participant goes.
+  sessions_.clear();
+}
+
+void ServerLoop::RequestStop() {
+  stop_.store(true);
+  waitset_.Wake();
+}
+
+void ServerLoop::Run() {
+  const auto period_ns = static_cast<int64_t>(options_.status_period_s * 1e9);
+  int64_t next_status_ns = NowNs() + period_ns;
+  PublishStatus(NowNs());
+  dds_attach_t tokens[4];
+  while (!stop_.load()) {
+    const int64_t wait_ns = std::max<int64_t>(0, next_status_ns - NowNs());
+    waitset_.Wait(wait_ns, tokens, 4);
+    if (stop_.load()) break;
+    ProcessSessionControls();
+    ProcessPoses();
+    const int64_t now = NowNs();
+    if (now >= next_status_ns) {
+      PublishStatus(now);
+      next_status_ns = now + period_ns;
+    }
+  }
+  PublishStatus(NowNs());
+}
+
+ServerLoop::Client* ServerLoop::OpenSession(const std::string& client_id) {
+  if (static_cast<int>(sessions_.size()) >= options_.max_sessions) {
+    ++counters_.refused_sessions;
+    ++counters_.input.unknown_clients;
+    Log(kLogClient, "session refused for '" + client_id + "': --max-sessions " +
+                        std::to_string(options_.max_sessions) + " reached");
+    return nullptr;
+  }
+  try {
+    Client client;
+    client.session = std::make_unique<Session>(client_id, model_, participant_, force_topic_, contact_topic_);
+    auto [it, inserted] = sessions_.emplace(client_id, std::move(client));
+    HAPCO_ASSERT(inserted, "OpenSession: session exists already");
+    ++counters_.sessions_opened;
+    Log(kLogSession, "session opened for '" + client_id + "' (" + std::to_string(sessions_.size()) + " open)");
+    return &it->second;
+  } catch (const std::exception& error) {
+    Log(kLogFailure, "cannot open a session for '" + client_id + "': " + error.what());
+    return nullptr;
+  }
+}
+
+void ServerLoop::ProcessSessionControls() {
+  hapco_idl_SessionControl control{};
+  while (session_reader_.Take(&control)) {
+    const std::string id = IdOf(control.client_id);
+    if (!ValidId(id)) {
+      ++counters_.invalid_client_ids;
+      ++counters_.input.unknown_clients;
+      Log(kLogClient, "session control with an invalid client id ignored");
+      continue;
+    }
+    auto it = sessions_.find(id);
+    switch (control.command) {
+      case hapco_idl_SESSION_JOIN:
+        if (it == sessions_.end()) OpenSession(id);
+        break;
+      case hapco_idl_SESSION_LEAVE:
+        if (it != sessions_.end()) {
+          const SessionCounters& c = it->second.session->counters();
+          closed_session_counters_.steps += c.steps;
+          closed_session_counters_.non_finite_forces += c.non_finite_forces;
+          closed_session_counters_.force_write_errors += c.force_write_errors;
+          closed_session_counters_.contact_frames_dropped += c.contact_frames_dropped;
+          closed_session_counters_.sequence_gaps += c.sequence_gaps;
+          sessions_.erase(it);
+          ++counters_.sessions_closed;
+          Log(kLogSession, "session closed for '" + id + "'");
+        }
+        break;
+      case hapco_idl_SESSION_RESET:
+        if (it != sessions_.end()) {
+          it->second.session->Reset();
+          it->second.has_pending = false;
+        }
+        break;
+      default:
+        Log(kLogClient, "unknown session command from '" + id + "' ignored");
+    }
+  }
+}
+
+void ServerLoop::Count(PoseVerdict verdict, const std::string& client_id) {
+  auto& in = counters_.input;
+  switch (verdict) {
+    case PoseVerdict::kAccept: return;
+    case PoseVerdict::kNonFinite: ++in.bad_pose_nan; break;
+    case PoseVerdict::kOutOfWorkspace: ++in.out_of_workspace; break;
+    case PoseVerdict::kJump: ++in.position_jumps; break;
+    case PoseVerdict::kOutOfOrder: ++in.out_of_order; break;
+    case PoseVerdict::kDuplicate: ++in.duplicates; break;
+    case PoseVerdict::kFlood: ++in.floods; break;
+  }
+  Log(kLogBadPose, std::string(VerdictName(verdict)) + " from '" + client_id + "' ignored");
+}
+
+void ServerLoop::ProcessPoses() {
+  hapco_idl_DevicePose pose{};
+  // Take everything available; keep the newest valid pose per client.
+  while (pose_reader_.Take(&pose)) {
+    const int64_t receive_ns = NowNs();
+    const std::string id = IdOf(pose.client_id);
+    if (!ValidId(id)) {
+      ++counters_.invalid_client_ids;
+      ++counters_.input.unknown_clients;
+      Log(kLogClient, "pose with an invalid client id ignored");
+      continue;
+    }
+    auto it = sessions_.find(id);
+    Client* client = nullptr;
+    if (it == sessions_.end()) {
+      const PoseVerdict first = CheckStateless(pose, options_.limits);
+      if (first != PoseVerdict::kAccept) {
+        Count(first, id);
+        continue;
+      }
+      client = OpenSession(id);
+      if (client == nullptr) continue;
+    } else {
+      client = &it->second;
+    }
+    if (client->has_pending && pose.sequence_number <= client->pending.sequence_number) {
+      Count(pose.sequence_number == client->pending.sequence_number ? PoseVerdict::kDuplicate
+                                                                    : PoseVerdict::kOutOfOrder, id);
+      continue;
+    }
+    const PoseVerdict verdict = client->session->Check(pose, receive_ns, options_.limits);
+    if (verdict != PoseVerdict::kAccept) {
+      Count(verdict, id);
+      continue;
+    }
+    if (client->has_pending) ++counters_.superseded;
+    client->pending = pose;
+    client->pending_receive_ns = receive_ns;
+    client->has_pending = true;
+  }
+  for (auto& [id, client] : sessions_) {
+    if (!client.has_pending) continue;
+    client.has_pending = false;
+    const int64_t ns = client.session->StepAndPublish(client.pending, client.pending_receive_ns);
+    step_times_us_.push_back(static_cast<double>(ns) * 1e-3);
+    if (options_.trace != nullptr) {
+      const auto& p = client.pending.position_m;
+      const Eigen::Vector3d& f = client.session->last_force_n();
+      std::fprintf(options_.trace, "%s,%llu,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%.3f\n", id.c_str(),
+                   static_cast<unsigned long long>(client.pending.sequence_number), p.x, p.y, p.z,
+                   f.x(), f.y(), f.z(), static_cast<double>(ns) * 1e-3);
+    }
+    if (client.session->counters().non_finite_forces > 0 &&
+        client.session->last_output().device_force_n.allFinite() == false) {
+      Log(kLogFailure, "non-finite force for '" + id + "': last good force sent");
+    }
+  }
+}
+
+ServerCounters ServerLoop::counters() const {
+  ServerCounters c = counters_;
+  SessionCounters s = closed_session_counters_;
+  for (const auto& [id, client] : sessions_) {
+    const SessionCounters& live = client.session->counters();
+    s.steps += live.steps;
+    s.non_finite_forces += live.non_finite_forces;
+    s.force_write_errors += live.force_write_errors;
+    s.contact_frames_dropped += live.contact_frames_dropped;
+    s.sequence_gaps += live.sequence_gaps;
+  }
+  c.steps = s.steps;
+  c.non_finite_forces = s.non_finite_forces;
+  c.force_write_errors = s.force_write_errors;
+  c.contact_frames_dropped = s.contact_frames_dropped;
+  c.sequence_gaps = s.sequence_gaps;
+  return c;
+}
+
+void ServerLoop::PublishStatus(int64_t now_ns) {
+  auto status = MakeSample<hapco_idl_ServerStatus>();
+  std::snprintf(status->server_id, sizeof(status->server_id), "%s", options_.server_id.c_str());
+  status->uptime_ns = now_ns - start_ns_;
+  status->sessions = static_cast<uint32_t>(sessions_.size());
+  status->step_time_p50_us = Percentile(&step_times_us_, 0.50);
+  status->step_time_p99_us = Percentile(&step_times_us_, 0.99);
+  status->step_time_max_us = step_times_us_.empty() ? 0.0 : *std::max_element(step_times_us_.begin(), step_times_us_.end());
+  status->counters = counters_.input;
+  step_times_us_.clear();
+  if (status_writer_.Write(*status) == DDS_RETCODE_OK) ++counters_.status_published;
+}
+
+std::string ServerLoop::Summary() const {
+  const ServerCounters c = counters();
+  const auto& in = c.input;
+  char line[640];
+  std::snprintf(line, sizeof(line),
+                "hapco-server: %llu steps, %llu sessions opened, %zu open; superseded %llu, "
+                "sequence gaps %llu; "
+                "bad input: nan %llu, workspace %llu, jumps %llu, out-of-order %llu, duplicates %llu, "
+                "unknown clients %llu, floods %llu; non-finite forces %llu, force write errors %llu, "
+                "contact frames dropped %llu",
+                static_cast<unsigned long long>(c.steps), static_cast<unsigned long long>(c.sessions_opened),
+                sessions_.size(), static_cast<unsigned long long>(c.superseded),
+                static_cast<unsigned long long>(c.sequence_gaps),
+                static_cast<unsigned long long>(in.bad_pose_nan), static_cast<unsigned long long>(in.out_of_workspace),
+                static_cast<unsigned long long>(in.position_jumps), static_cast<unsigned long long>(in.out_of_order),
+                static_cast<unsigned long long>(in.duplicates), static_cast<unsigned long long>(in.unknown_clients),
+                static_cast<unsigned long long>(in.floods), static_cast<unsigned long long>(c.non_finite_forces),
+                static_cast<unsigned long long>(c.force_write_errors),
+                static_cast<unsigned long long>(c.contact_frames_dropped));
+  return line;
+}
+
+void ServerLoop::Log(int kind, const std::string& message) {
+  if (!options_.log) return;
+  const auto k = static_cast<std::size_t>(kind);
+  const int64_t now = NowNs();
+  // At most one line per kind per second; the number of suppressed lines is reported.
+  if (last_log_ns_[k] != 0 && now - last_log_ns_[k] < 1'000'000'000LL) {
+    ++suppressed_logs_[k];
+    return;
+  }
+  if (suppressed_logs_[k] > 0) {
+    std::fprintf(stderr, "hapco-server: %s (+%llu similar suppressed)\n", message.c_str(),
+                 static_cast<unsigned long long>(suppressed_logs_[k]));
+  } else {
+    std::fprintf(stderr, "hapco-server: %s\n", message.c_str());
+  }
+  last_log_ns_[k] = now;
+  suppressed_logs_[k] = 0;
+}
+
+}  // namespace hapco::service

@@ -1,0 +1,109 @@
+#pragma once
+// The hapco-server loop: one thread that waits on a WaitSet (pose data, session control,
+// wake-up guard, status period), takes every available pose, keeps the newest per client
+// (older ones are superseded = dropped, counted), steps each client's session once and
+// publishes its force. Sessions are created here, in the server's own thread, never in a
+// DDS listener (platform-notes.md: no entity creation inside a listener).
+// Bad input is counted, logged at most once per second per kind, and never fatal.
+#include <atomic>
+#include <cstdint>
+#include <cstdio>
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "hapco_types.h"
+#include "service/dds.h"
+#include "service/session.h"
+#include "sim/two_body_model.h"
+
+namespace hapco::service {
+
+struct ServerOptions {
+  std::string server_id = "hapco-server";
+  double status_period_s = 1.0;  // ServerStatus period, s
+  int max_sessions = 16;         // clients beyond this are refused (counted as unknown)
+  PoseLimits limits;
+  bool log = true;               // rate-limited stderr log of bad input and sessions
+  // Optional step trace (CSV, one row per step: client, sequence, position, force sent);
+  // for tests and debugging. Not owned.
+  std::FILE* trace = nullptr;
+};
+
+// Everything the server counted since start.
+struct ServerCounters {
+  hapco_idl_InputCounters input{};  // as published in ServerStatus
+  uint64_t invalid_client_ids = 0;  // also counted in input.unknown_clients
+  uint64_t refused_sessions = 0;    // --max-sessions reached; also in input.unknown_clients
+  uint64_t superseded = 0;          // older poses of a client replaced by a newer one in a batch
+  uint64_t steps = 0;
+  uint64_t non_finite_forces = 0;   // solve gave NaN/Inf; the last good force was sent
+  uint64_t force_write_errors = 0;
+  uint64_t contact_frames_dropped = 0;
+  uint64_t sequence_gaps = 0;       // poses never seen (lost or overwritten before the take)
+  uint64_t sessions_opened = 0;
+  uint64_t sessions_closed = 0;
+  uint64_t status_published = 0;
+};
+
+class ServerLoop {
+ public:
+  // Creates the participant, topics, pose/session readers and the status writer in
+  // `domain_id` (configuration from CYCLONEDDS_URI). Throws DdsError on setup failure.
+  ServerLoop(const sim::TwoBodyModel& model, dds_domainid_t domain_id, const ServerOptions& options);
+  ~ServerLoop();
+  ServerLoop(const ServerLoop&) = delete;
+  ServerLoop& operator=(const ServerLoop&) = delete;
+
+  // Serves until RequestStop(). Publishes a last status before returning.
+  void Run();
+  // Thread-safe (not async-signal-safe: call it from a signal-waiting thread).
+  void RequestStop();
+
+  ServerCounters counters() const;  // call after Run() returned, or from the server thread
+  std::size_t sessions() const { return sessions_.size(); }
+  // "hapco-server: ... steps, ... sessions, counters ..." (one line).
+  std::string Summary() const;
+
+ private:
+  struct Client {
+    std::unique_ptr<Session> session;
+    hapco_idl_DevicePose pending{};
+    int64_t pending_receive_ns = 0;
+    bool has_pending = false;
+  };
+  void ProcessSessionControls();
+  void ProcessPoses();
+  void PublishStatus(int64_t now_ns);
+  Client* OpenSession(const std::string& client_id);
+  void Count(PoseVerdict verdict, const std::string& client_id);
+  void Log(int kind, const std::string& message);
+
+  const sim::TwoBodyModel& model_;
+  ServerOptions options_;
+  // Declared first so it is destroyed last (wrappers: children before the participant).
+  Participant participant_;
+  Topic<hapco_idl_DevicePose> pose_topic_;
+  Topic<hapco_idl_SessionControl> session_topic_;
+  Topic<hapco_idl_ServerStatus> status_topic_;
+  Topic<hapco_idl_FeedbackForce> force_topic_;
+  Topic<hapco_idl_ContactStateFrame> contact_topic_;
+  Subscriber subscriber_;
+  Publisher publisher_;
+  Reader<hapco_idl_DevicePose> pose_reader_;
+  Reader<hapco_idl_SessionControl> session_reader_;
+  Writer<hapco_idl_ServerStatus> status_writer_;
+  WaitSet waitset_;
+  std::map<std::string, Client> sessions_;
+  std::atomic<bool> stop_{false};
+  ServerCounters counters_;
+  // Counters of sessions closed so far (live sessions are added on demand).
+  SessionCounters closed_session_counters_;
+  std::vector<double> step_times_us_;  // this status period
+  int64_t start_ns_ = 0;
+  std::vector<int64_t> last_log_ns_;
+  std::vector<uint64_t> suppressed_logs_;
+};
+
+}  // namespace hapco::service

@@ -1,0 +1,150 @@
+#include "service/session.h"
+
+#include <algorithm>
+#include <cmath>
+#include <ctime>
+
+#include "contact/projection.h"
+
+namespace hapco::service {
+namespace {
+
+int64_t MonotonicNs() {
+  timespec ts{};
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000LL + ts.tv_nsec;
+}
+
+hapco_idl_SolverStatus ToIdl(contact::SolverStatus status, int contacts) {
+  if (contacts == 0) return hapco_idl_SOLVER_NO_CONTACT;
+  switch (status) {
+    case contact::SolverStatus::kConverged: return hapco_idl_SOLVER_CONVERGED;
+    case contact::SolverStatus::kMaxIterations: return hapco_idl_SOLVER_MAX_ITERATIONS;
+    case contact::SolverStatus::kTimeBudgetExceeded: return hapco_idl_SOLVER_TIME_BUDGET_EXCEEDED;
+    case contact::SolverStatus::kDiverged: return hapco_idl_SOLVER_DIVERGED;
+  }
+  return hapco_idl_SOLVER_DIVERGED;
+}
+
+hapco_idl_Vec3 ToIdl(const Eigen::Vector3d& v) { return {v.x(), v.y(), v.z()}; }
+
+}  // namespace
+
+Session::Session(std::string client_id, const sim::TwoBodyModel& model,
+                 const Participant& participant,
+                 const Topic<hapco_idl_FeedbackForce>& force_topic,
+                 const Topic<hapco_idl_ContactStateFrame>& contact_topic)
+    : client_id_(std::move(client_id)),
+      sim_(model),
+      publisher_(participant, ClientPartition(client_id_)),
+      force_writer_(publisher_, force_topic),
+      contact_writer_(publisher_, contact_topic),
+      frame_(MakeSample<hapco_idl_ContactStateFrame>()) {
+  SetClientId(force_.client_id, client_id_);
+  SetClientId(frame_->client_id, client_id_);
+  const auto capacity = static_cast<uint32_t>(
+      std::min<std::size_t>(model.tool_candidates().size(), hapco_idl_MAX_CONTACT_SAMPLES));
+  ReserveContacts(frame_.get(), capacity);
+}
+
+PoseVerdict Session::Check(const hapco_idl_DevicePose& pose, int64_t receive_ns,
+                           const PoseLimits& limits) {
+  if (flood_tokens_ < 0) {
+    flood_tokens_ = limits.flood_burst;
+  } else {
+    const double elapsed_ms = static_cast<double>(receive_ns - flood_last_ns_) * 1e-6;
+    flood_tokens_ = std::min(limits.flood_burst, flood_tokens_ + elapsed_ms * limits.max_poses_per_ms);
+  }
+  flood_last_ns_ = receive_ns;
+  if (flood_tokens_ < 1.0) return PoseVerdict::kFlood;
+  flood_tokens_ -= 1.0;
+  const Eigen::Vector3d p(pose.position_m.x, pose.position_m.y, pose.position_m.z);
+  const auto& q = pose.orientation;
+  if (!p.allFinite() || !std::isfinite(q.w) || !std::isfinite(q.x) || !std::isfinite(q.y) ||
+      !std::isfinite(q.z)) {
+    return PoseVerdict::kNonFinite;
+  }
+  if (p.norm() > limits.workspace_m) return PoseVerdict::kOutOfWorkspace;
+  if (have_pose_) {
+    if (pose.sequence_number == last_sequence_) return PoseVerdict::kDuplicate;
+    if (pose.sequence_number < last_sequence_) return PoseVerdict::kOutOfOrder;
+    // A lost pose legitimately allows a longer move: scale the limit by the sequence gap.
+    const double gap = static_cast<double>(std::min<uint64_t>(pose.sequence_number - last_sequence_, 1000));
+    if ((p - last_position_m_).norm() > limits.max_jump_m * gap) return PoseVerdict::kJump;
+  }
+  return PoseVerdict::kAccept;
+}
+
+int64_t Session::StepAndPublish(const hapco_idl_DevicePose& pose, int64_t receive_ns) {
+  const Eigen::Vector3d p(pose.position_m.x, pose.position_m.y, pose.position_m.z);
+  if (have_pose_ && pose.sequence_number > last_sequence_ + 1) {
+    counters_.sequence_gaps += pose.sequence_number - last_sequence_ - 1;
+  }
+  have_pose_ = true;
+  last_sequence_ = pose.sequence_number;
+  last_position_m_ = p;
+  const sim::StepOutput& out = sim_.Step(p);
+  ++counters_.steps;
+  Eigen::Vector3d force_n = out.device_force_n;
+  if (!force_n.allFinite()) {
+    // Never send a NaN: the last good force, counted. (The next steps may recover: the
+    // session keeps its state; a persistent failure shows in the counter.)
+    ++counters_.non_finite_forces;
+    force_n = last_good_force_n_;
+  } else {
+    last_good_force_n_ = force_n;
+  }
+  force_.pose_sequence = pose.sequence_number;
+  force_.client_time_ns = pose.client_time_ns;
+  force_.server_receive_ns = receive_ns;
+  force_.force_n = ToIdl(force_n);
+  force_.solver_status = ToIdl(out.status, out.num_contacts);
+  force_.iterations = static_cast<uint32_t>(std::max(0, out.iterations));
+  force_.separating_count = static_cast<uint32_t>(out.state_counts[0]);
+  force_.sticking_count = static_cast<uint32_t>(out.state_counts[1]);
+  force_.sliding_count = static_cast<uint32_t>(out.state_counts[2]);
+  force_.server_send_ns = MonotonicNs();
+  if (force_writer_.Write(force_) != DDS_RETCODE_OK) ++counters_.force_write_errors;
+  // The contact frame goes after the force: the force is the latency-critical sample.
+  FillContactFrame(pose.sequence_number);
+  if (contact_writer_.Write(*frame_) != DDS_RETCODE_OK) ++counters_.contact_frames_dropped;
+  return MonotonicNs() - receive_ns;
+}
+
+void Session::FillContactFrame(uint64_t pose_sequence) {
+  frame_->step = counters_.steps;
+  frame_->pose_sequence = pose_sequence;
+  const auto& contacts = sim_.contacts();
+  const auto& result = sim_.last_result();
+  const uint32_t capacity = frame_->contacts._maximum;
+  if (contacts.size() > capacity) ++counters_.contacts_truncated;
+  const auto n = static_cast<uint32_t>(std::min<std::size_t>(contacts.size(), capacity));
+  const bool have_result = result.force_n.size() >= 3 * static_cast<Eigen::Index>(n) &&
+                           result.displacement_m.size() >= 3 * static_cast<Eigen::Index>(n);
+  const double force_scale_n =
+      result.force_n.size() > 0 ? result.force_n.cwiseAbs().maxCoeff() : 0.0;
+  uint32_t written = 0;
+  for (uint32_t alpha = 0; alpha < n && have_result; ++alpha) {
+    const auto& contact = contacts[alpha];
+    const Eigen::Vector3d r = result.force_n.segment<3>(3 * static_cast<Eigen::Index>(alpha));
+    const Eigen::Vector3d u = result.displacement_m.segment<3>(3 * static_cast<Eigen::Index>(alpha));
+    hapco_idl_ContactSample& s = frame_->contacts._buffer[written++];
+    s.id = static_cast<uint32_t>(contact.tool_node);
+    s.position_m = ToIdl(contact.obstacle_point_m);
+    s.normal = ToIdl(contact.frame.row(0).transpose());
+    s.force_n = ToIdl(contact.frame.transpose() * r);
+    s.gap_m = u[0];
+    s.slip_m = u.tail<2>().norm();
+    s.state = static_cast<hapco_idl_ContactState>(contact::ClassifyContact(
+        r, u, 1e-9 * force_scale_n, sim_.parameters.global_tolerance_m));
+  }
+  frame_->contacts._length = written;
+}
+
+void Session::Reset() {
+  sim_.Reset();
+  have_pose_ = false;
+  last_good_force_n_.setZero();
+}
+
+}  // namespace hapco::service

@@ -1,0 +1,90 @@
+#pragma once
+// One client's haptic session on the server: its TwoBodySession on the shared model, the
+// validation state of its pose stream, and its own publisher (partition ClientPartition(id))
+// with the force and contact-state writers. Created by the server thread when the client
+// joins (SESSION_JOIN or its first valid pose), never inside a listener callback.
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include <Eigen/Dense>
+
+#include "hapco_types.h"
+#include "service/dds.h"
+#include "sim/step_pipeline.h"
+#include "sim/two_body_model.h"
+
+namespace hapco::service {
+
+// Plausibility limits of the pose stream (design.md: input is never trusted).
+struct PoseLimits {
+  double workspace_m = 0.10;  // |d| above this is out of the device workspace, m
+  // Largest plausible position change per sequence step, m (0.1 m/s at 1 kHz would be
+  // 0.1 mm; 2 mm leaves room for hand-held motion). Scaled by the sequence gap.
+  double max_jump_m = 0.002;
+  // Flood limit: a token bucket refilled at max_poses_per_ms per ms holding at most
+  // flood_burst poses. A 1 kHz client with scheduling jitter never empties it; a client
+  // sending more than ~2 poses per ms for longer than a few ms does (extras dropped).
+  double max_poses_per_ms = 2.0;
+  double flood_burst = 5.0;
+};
+
+// Why a pose was not stepped.
+enum class PoseVerdict { kAccept, kNonFinite, kOutOfWorkspace, kJump, kOutOfOrder, kDuplicate, kFlood };
+
+// Per-session counters of what the server did with this client's poses and samples.
+struct SessionCounters {
+  uint64_t steps = 0;
+  uint64_t non_finite_forces = 0;      // solve gave NaN/Inf: the last good force was sent
+  uint64_t force_write_errors = 0;
+  uint64_t contact_frames_dropped = 0; // DDS_RETCODE_TIMEOUT (or other error) on the frame
+  uint64_t contacts_truncated = 0;     // frames with more contacts than the IDL bound
+  uint64_t sequence_gaps = 0;          // sequence numbers never seen between accepted poses
+                                       // (lost on the network or overwritten in the reader)
+};
+
+class Session {
+ public:
+  // Throws DdsError if the writers cannot be created.
+  Session(std::string client_id, const sim::TwoBodyModel& model, const Participant& participant,
+          const Topic<hapco_idl_FeedbackForce>& force_topic,
+          const Topic<hapco_idl_ContactStateFrame>& contact_topic);
+
+  const std::string& client_id() const { return client_id_; }
+
+  // Classifies a pose against the limits and this session's stream (no state change except
+  // the flood window, which counts every pose seen). receive_ns: server CLOCK_MONOTONIC.
+  PoseVerdict Check(const hapco_idl_DevicePose& pose, int64_t receive_ns, const PoseLimits& limits);
+
+  // One haptic step for an accepted pose, then the force (and contact frame) is written.
+  // Returns the step wall time in ns (solve + publish).
+  int64_t StepAndPublish(const hapco_idl_DevicePose& pose, int64_t receive_ns);
+
+  // SESSION_RESET: reference configuration, the stream restarts (any next sequence accepted).
+  void Reset();
+
+  const SessionCounters& counters() const { return counters_; }
+  const sim::StepOutput& last_output() const { return sim_.last_output(); }
+  uint64_t last_sequence() const { return last_sequence_; }
+  const Eigen::Vector3d& last_force_n() const { return last_good_force_n_; }  // last sent, N
+
+ private:
+  void FillContactFrame(uint64_t pose_sequence);
+
+  std::string client_id_;
+  sim::TwoBodySession sim_;
+  Publisher publisher_;
+  Writer<hapco_idl_FeedbackForce> force_writer_;
+  Writer<hapco_idl_ContactStateFrame> contact_writer_;
+  SamplePtr<hapco_idl_ContactStateFrame> frame_;  // reserved once, reused every step
+  hapco_idl_FeedbackForce force_{};
+  bool have_pose_ = false;
+  uint64_t last_sequence_ = 0;
+  Eigen::Vector3d last_position_m_ = Eigen::Vector3d::Zero();
+  Eigen::Vector3d last_good_force_n_ = Eigen::Vector3d::Zero();
+  double flood_tokens_ = -1;  // < 0: not started
+  int64_t flood_last_ns_ = 0;
+  SessionCounters counters_;
+};
+
+}  // namespace hapco::service
