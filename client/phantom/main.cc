@@ -247,8 +247,11 @@ int Run(const Options& o) {
   service::SetClientId(pose.client_id, o.client_id);
   pose.orientation = {1.0, 0.0, 0.0, 0.0};
   hapco_idl_FeedbackForce force{};
-  std::vector<double> round_trips_us;
+  // Round trip: pose sampled -> its force taken at a tick (so it includes the wait for the
+  // tick that renders it). server_us: server receive -> send (step + publish).
+  std::vector<double> round_trips_us, server_us;
   round_trips_us.reserve(static_cast<std::size_t>(ticks) + 64);
+  server_us.reserve(static_cast<std::size_t>(ticks) + 64);
   uint64_t missed_ticks = 0, forces_received = 0, write_errors = 0;
   double peak_rendered_n = 0;
   uint64_t last_force_sequence = 0;
@@ -284,7 +287,8 @@ int Run(const Options& o) {
       if (o.mode == "kinematic") {
         position = trajectory[static_cast<std::size_t>(k)];
       } else {
-        const int previous = std::max(0, k - 1);
+        // The hand's target velocity: the trajectory's, zero once it holds its last point.
+        const int previous = tick > trajectory_ticks ? k : std::max(0, k - 1);
         const Eigen::Vector3d velocity =
             (trajectory[static_cast<std::size_t>(k)] - trajectory[static_cast<std::size_t>(previous)]) / tick_s;
         position = phantom::Quantize(hand.Step(trajectory[static_cast<std::size_t>(k)], velocity, rendered, tick_s));
@@ -306,6 +310,7 @@ int Run(const Options& o) {
       raw = Eigen::Vector3d(force.force_n.x, force.force_n.y, force.force_n.z);
       const double round_trip_us = static_cast<double>(NowNs() - force.client_time_ns) * 1e-3;
       round_trips_us.push_back(round_trip_us);
+      server_us.push_back(static_cast<double>(force.server_send_ns - force.server_receive_ns) * 1e-3);
       if (csv != nullptr && taken++ > 0) FlushRow(csv, tick, publishing, position, pending_row);
       pending_row = {static_cast<long long>(force.pose_sequence), raw, round_trip_us, rendered};
     }
@@ -323,11 +328,14 @@ int Run(const Options& o) {
   if (csv != nullptr) std::fclose(csv);
 
   std::vector<double> rt = round_trips_us;
-  std::printf("hapco-phantom %s: %d ticks, %llu forces received; round trip p50 %.0f us, p99 %.0f us, "
+  std::printf("hapco-phantom %s: %d ticks, %llu forces received; round trip (to the rendering tick) "
+              "p50 %.0f us, p99 %.0f us, max %.0f us; server step+publish p50 %.0f us, p99 %.0f us, "
               "max %.0f us; missed ticks %llu, stale ticks %llu, NaN forces %llu, clamped %llu, "
               "peak rendered force %.3f N, pose write errors %llu\n",
               o.client_id.c_str(), ticks, static_cast<unsigned long long>(forces_received),
               phantom::Quantile(&rt, 0.5), phantom::Quantile(&rt, 0.99), phantom::Quantile(&rt, 1.0),
+              phantom::Quantile(&server_us, 0.5), phantom::Quantile(&server_us, 0.99),
+              phantom::Quantile(&server_us, 1.0),
               static_cast<unsigned long long>(missed_ticks), static_cast<unsigned long long>(safety.stale_ticks()),
               static_cast<unsigned long long>(safety.rejected_non_finite()),
               static_cast<unsigned long long>(safety.clamped()), peak_rendered_n,

@@ -243,6 +243,10 @@ TEST(ServerProcess, NanPoseAndInvalidClientIdAreCountedAndTheServerStaysUp) {
   Writer<hapco_idl_DevicePose> pose_writer(publisher, pose_topic);
   Reader<hapco_idl_FeedbackForce> force_reader(client_subscriber, force_topic);
   Reader<hapco_idl_ServerStatus> status_reader(subscriber, status_topic);
+  // A recorder's view: every client's contact-state frames (partition wildcard).
+  Topic<hapco_idl_ContactStateFrame> contact_topic(participant);
+  Subscriber recorder_subscriber(participant, kAllClientsPartition);
+  Reader<hapco_idl_ContactStateFrame> contact_reader(recorder_subscriber, contact_topic);
   ASSERT_TRUE(pose_writer.WaitForReaders(1, DDS_SECS(60)));
 
   const sim::SceneSpec scene = io::LoadSceneFile(kScene);
@@ -299,6 +303,20 @@ TEST(ServerProcess, NanPoseAndInvalidClientIdAreCountedAndTheServerStaysUp) {
   // Still serving: the next valid pose gets a finite force.
   ASSERT_TRUE(step(2));
   EXPECT_TRUE(std::isfinite(force.force_n.x) && std::isfinite(force.force_n.y) && std::isfinite(force.force_n.z));
+
+  // The contact state of a step reached the recorder: the press puts the tool's bottom
+  // face (zero initial gap) in contact, with unit normals.
+  auto frame = MakeSample<hapco_idl_ContactStateFrame>();
+  ASSERT_TRUE(contact_reader.WaitForData(DDS_SECS(30)));
+  ASSERT_TRUE(contact_reader.Take(frame.get()));
+  EXPECT_STREQ(frame->client_id, "good-1");
+  EXPECT_GE(frame->pose_sequence, 1u);
+  EXPECT_LT(frame->pose_sequence, next_sequence);
+  ASSERT_GT(frame->contacts._length, 0u);
+  for (uint32_t i = 0; i < frame->contacts._length; ++i) {
+    const auto& n = frame->contacts._buffer[i].normal;
+    EXPECT_NEAR(std::sqrt(n.x * n.x + n.y * n.y + n.z * n.z), 1.0, 1e-12);
+  }
 
   server.Signal(SIGTERM);
   ASSERT_EQ(server.Wait(30'000), 0) << ReadFile(dir + "/server.err");
