@@ -638,6 +638,39 @@ void StudyReferenceCheck(const Options& o) {
     }
   }
   std::fclose(s);
+
+  // How strongly the contacts are coupled: λ_max(W) against max W_ii at the 10th press step
+  // (1 mm), on both meshes. The Jacobi order needs ρ λ_max(W) < 2; the one-contact steps need
+  // ρ λ_max(W_αα) < 2 (docs/stability.md).
+  std::FILE* w = OpenCsv(o, "stability_spectrum.csv",
+                         "benchmark,mesh,contacts,max_w_ii_m_per_n,lambda_max_w_m_per_n,lambda_max_w_over_max_w_ii,"
+                         "max_lambda_block_over_max_w_ii");
+  for (int bench : {1, 2}) {
+    for (bool coarse : {true, false}) {
+      const SceneSpec scene = coarse ? CoarseScene(LoadBenchmark(o, bench)) : LoadBenchmark(o, bench);
+      const TwoBodyModel model(scene);
+      TwoBodySession session(model);
+      for (int step = 1; step <= std::min(10, scene.total_steps()); ++step) {
+        session.Step(scene.DeviceTranslationAtStep(step));
+      }
+      const Eigen::MatrixXd& flex = session.last_problem().flexibility_m_per_n;
+      if (flex.rows() == 0) continue;
+      const double max_wii = flex.diagonal().maxCoeff();
+      const double lambda = Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(flex, Eigen::EigenvaluesOnly)
+                                .eigenvalues().maxCoeff();
+      double block = 0.0;
+      for (Eigen::Index a = 0; a < flex.rows() / 3; ++a) {
+        const Eigen::Matrix3d b = flex.block<3, 3>(3 * a, 3 * a);
+        block = std::max(block, Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(b).eigenvalues().maxCoeff());
+      }
+      std::fprintf(w, "%d,%s,%ld,%.4e,%.4e,%.3f,%.3f\n", bench, coarse ? "coarse" : "default",
+                   static_cast<long>(flex.rows() / 3), max_wii, lambda, lambda / max_wii, block / max_wii);
+      std::printf("benchmark %d %s mesh: %ld contacts, lambda_max(W) = %.2f max W_ii, max lambda(W_aa) = %.2f max W_ii\n",
+                  bench, coarse ? "coarse" : "default", static_cast<long>(flex.rows() / 3), lambda / max_wii,
+                  block / max_wii);
+    }
+  }
+  std::fclose(w);
 }
 
 Options Parse(int argc, char** argv) {
