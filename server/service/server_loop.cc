@@ -19,7 +19,8 @@ int64_t NowNs() {
 
 constexpr dds_attach_t kPoseToken = 1;
 constexpr dds_attach_t kSessionToken = 2;
-enum LogKind { kLogBadPose = 0, kLogClient = 1, kLogSession = 2, kLogFailure = 3, kLogKinds = 4 };
+// Rate limiting is per kind; each pose verdict is a kind of its own (kLogBadPose + verdict).
+enum LogKind { kLogClient = 0, kLogSession = 1, kLogFailure = 2, kLogBadPose = 3, kLogKinds = kLogBadPose + 7 };
 
 const char* VerdictName(PoseVerdict verdict) {
   switch (verdict) {
@@ -161,7 +162,14 @@ void ServerLoop::ProcessSessionControls() {
     auto it = sessions_.find(id);
     switch (control.command) {
       case hapco_idl_SESSION_JOIN:
-        if (it == sessions_.end()) OpenSession(id);
+        if (it == sessions_.end()) {
+          OpenSession(id);
+        } else {
+          // A restarted client (its sequence starts again): a fresh stream and scene state.
+          it->second.session->Reset();
+          it->second.has_pending = false;
+          Log(kLogSession, "session of '" + id + "' joined again: reset");
+        }
         break;
       case hapco_idl_SESSION_LEAVE:
         if (it != sessions_.end()) {
@@ -199,7 +207,7 @@ void ServerLoop::Count(PoseVerdict verdict, const std::string& client_id) {
     case PoseVerdict::kDuplicate: ++in.duplicates; break;
     case PoseVerdict::kFlood: ++in.floods; break;
   }
-  Log(kLogBadPose, std::string(VerdictName(verdict)) + " from '" + client_id + "' ignored");
+  Log(kLogBadPose + static_cast<int>(verdict), std::string(VerdictName(verdict)) + " from '" + client_id + "' ignored");
 }
 
 void ServerLoop::ProcessPoses() {

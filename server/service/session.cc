@@ -26,6 +26,8 @@ hapco_idl_SolverStatus ToIdl(contact::SolverStatus status, int contacts) {
   return hapco_idl_SOLVER_DIVERGED;
 }
 
+constexpr uint64_t kMaxJumpScale = 10;
+
 hapco_idl_Vec3 ToIdl(const Eigen::Vector3d& v) { return {v.x(), v.y(), v.z()}; }
 
 }  // namespace
@@ -68,8 +70,9 @@ PoseVerdict Session::Check(const hapco_idl_DevicePose& pose, int64_t receive_ns,
   if (have_pose_) {
     if (pose.sequence_number == last_sequence_) return PoseVerdict::kDuplicate;
     if (pose.sequence_number < last_sequence_) return PoseVerdict::kOutOfOrder;
-    // A lost pose legitimately allows a longer move: scale the limit by the sequence gap.
-    const double gap = static_cast<double>(std::min<uint64_t>(pose.sequence_number - last_sequence_, 1000));
+    // A lost pose legitimately allows a longer move: scale the limit by the sequence gap, up
+    // to kMaxJumpScale (else a pose with a huge sequence number could move anywhere).
+    const double gap = static_cast<double>(std::min<uint64_t>(pose.sequence_number - last_sequence_, kMaxJumpScale));
     if ((p - last_position_m_).norm() > limits.max_jump_m * gap) return PoseVerdict::kJump;
   }
   return PoseVerdict::kAccept;

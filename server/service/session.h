@@ -20,7 +20,9 @@ namespace hapco::service {
 struct PoseLimits {
   double workspace_m = 0.10;  // |d| above this is out of the device workspace, m
   // Largest plausible position change per sequence step, m (0.1 m/s at 1 kHz would be
-  // 0.1 mm; 2 mm leaves room for hand-held motion). Scaled by the sequence gap.
+  // 0.1 mm; 2 mm leaves room for hand-held motion). Scaled by the sequence gap (at most 10x).
+  // A jump is ignored (no step, the client keeps its last force); a client that really is
+  // elsewhere recovers with SESSION_RESET or SESSION_JOIN (the next pose starts the stream).
   double max_jump_m = 0.002;
   // Flood limit: a token bucket refilled at max_poses_per_ms per ms holding at most
   // flood_burst poses. A 1 kHz client with scheduling jitter never empties it; a client
@@ -60,7 +62,8 @@ class Session {
   // Returns the step wall time in ns (solve + publish).
   int64_t StepAndPublish(const hapco_idl_DevicePose& pose, int64_t receive_ns);
 
-  // SESSION_RESET: reference configuration, the stream restarts (any next sequence accepted).
+  // SESSION_RESET (and a repeated SESSION_JOIN: a restarted client): reference
+  // configuration, the stream restarts (any next sequence and position accepted).
   void Reset();
 
   const SessionCounters& counters() const { return counters_; }

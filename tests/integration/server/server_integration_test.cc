@@ -225,9 +225,9 @@ TEST(ServerProcess, KinematicPhantomReceivesTheOfflineForces) {
   EXPECT_GE(compared_offline, 1);
 }
 
-// Bad input from a client the test plays itself: a NaN pose and a pose with an invalid id
-// are counted (ServerStatus) and the server keeps serving the valid client.
-TEST(ServerProcess, NanPoseAndInvalidClientIdAreCountedAndTheServerStaysUp) {
+// Bad input from a client the test plays itself (NaN, invalid id, out of workspace, jump,
+// duplicate, out of order, flood) is counted (ServerStatus) and the server keeps serving.
+TEST(ServerProcess, BadPosesAndInvalidClientIdAreCountedAndTheServerStaysUp) {
   const std::string dir = TestDir();
   const dds_domainid_t domain = SetUpTestDomain();
   Process server({HAPCO_SERVER_EXE, kScene, "--domain", std::to_string(domain), "--status-period", "0.05"},
@@ -277,28 +277,57 @@ TEST(ServerProcess, NanPoseAndInvalidClientIdAreCountedAndTheServerStaysUp) {
   ASSERT_TRUE(step(1));
   EXPECT_TRUE(std::isfinite(force.force_n.z));
 
-  // A NaN pose, then a pose with an invalid id ('*' is a partition wildcard).
-  hapco_idl_DevicePose bad = pose;
-  bad.sequence_number = 1'000'000;  // a NaN is rejected whatever its sequence
-  bad.position_m.y = std::nan("");
-  hapco_idl_DevicePose stranger = pose;
-  std::memset(stranger.client_id, 0, sizeof(stranger.client_id));
-  std::strcpy(stranger.client_id, "bad*id");
+  // Bad input, each kind once per round until the status shows all of them counted: a NaN
+  // pose, a pose with an invalid id ('*' is a partition wildcard), one outside the workspace
+  // (default 0.1 m), a jump of 5 cm (default limit 2 mm per sequence step), a repeat of the
+  // stepped sequence and an older sequence. None of them is stepped.
+  std::vector<hapco_idl_DevicePose> bad_poses(6, pose);
+  bad_poses[0].sequence_number = 1'000'000;
+  bad_poses[0].position_m.y = std::nan("");
+  std::memset(bad_poses[1].client_id, 0, sizeof(bad_poses[1].client_id));
+  std::strcpy(bad_poses[1].client_id, "bad*id");
+  bad_poses[2].sequence_number = 2'000'000;
+  bad_poses[2].position_m.x = 0.5;
+  bad_poses[3].sequence_number = 3'000'000;
+  bad_poses[3].position_m.x += 0.05;
+  bad_poses[4].sequence_number = force.pose_sequence;  // stepped already
+  bad_poses[5].sequence_number = 0;                     // older than the stepped one
   hapco_idl_ServerStatus status{};
+  auto all_counted = [&](const hapco_idl_InputCounters& c) {
+    return c.bad_pose_nan >= 1 && c.unknown_clients >= 1 && c.out_of_workspace >= 1 && c.position_jumps >= 1 &&
+           c.duplicates >= 1 && c.out_of_order >= 1;
+  };
   bool counted = false;
   const dds_time_t deadline = dds_time() + DDS_SECS(30);
   while (!counted && dds_time() < deadline) {
-    ASSERT_EQ(pose_writer.Write(bad), DDS_RETCODE_OK);
-    ASSERT_EQ(pose_writer.Write(stranger), DDS_RETCODE_OK);
+    for (const auto& bad_pose : bad_poses) ASSERT_EQ(pose_writer.Write(bad_pose), DDS_RETCODE_OK);
     if (status_reader.WaitForData(DDS_MSECS(100))) {
-      while (status_reader.Take(&status)) {
-        counted = status.counters.bad_pose_nan >= 1 && status.counters.unknown_clients >= 1;
-      }
+      while (status_reader.Take(&status)) counted = all_counted(status.counters);
     }
   }
-  ASSERT_TRUE(counted) << "nan " << status.counters.bad_pose_nan << ", unknown " << status.counters.unknown_clients;
+  const auto& c = status.counters;
+  ASSERT_TRUE(counted) << "nan " << c.bad_pose_nan << ", unknown " << c.unknown_clients << ", workspace "
+                       << c.out_of_workspace << ", jumps " << c.position_jumps << ", duplicates " << c.duplicates
+                       << ", out of order " << c.out_of_order;
   EXPECT_EQ(status.sessions, 1u);  // the stranger got no session
-  EXPECT_EQ(status.counters.out_of_workspace, 0u);
+  EXPECT_LE(status.step_time_p50_us, status.step_time_p99_us);
+  EXPECT_LE(status.step_time_p99_us, status.step_time_max_us);
+
+  // A flood: bursts of 200 poses written back to back until the server counts extras (the
+  // reader keeps 4 per client, so how many the server sees per burst varies; bounded).
+  bool flooded = false;
+  const dds_time_t flood_deadline = dds_time() + DDS_SECS(30);
+  while (!flooded && dds_time() < flood_deadline) {
+    for (int i = 0; i < 200; ++i) {
+      pose.sequence_number = next_sequence++;
+      ASSERT_EQ(pose_writer.Write(pose), DDS_RETCODE_OK);
+    }
+    if (status_reader.WaitForData(DDS_MSECS(100))) {
+      while (status_reader.Take(&status)) flooded = status.counters.floods >= 1;
+    }
+  }
+  EXPECT_TRUE(flooded);
+  EXPECT_EQ(status.sessions, 1u);
 
   // Still serving: the next valid pose gets a finite force.
   ASSERT_TRUE(step(2));
