@@ -137,7 +137,8 @@ ServerLoop::Client* ServerLoop::OpenSession(const std::string& client_id) {
   }
   try {
     Client client;
-    client.session = std::make_unique<Session>(client_id, model_, participant_, force_topic_, contact_topic_);
+    client.session = std::make_unique<Session>(client_id, model_, participant_, force_topic_, contact_topic_,
+                                               options_.time_budget_s);
     auto [it, inserted] = sessions_.emplace(client_id, std::move(client));
     HAPCO_ASSERT(inserted, "OpenSession: session exists already");
     ++counters_.sessions_opened;

@@ -25,6 +25,9 @@ struct ServerOptions {
   double status_period_s = 1.0;  // ServerStatus period, s
   int max_sessions = 16;         // clients beyond this are refused (counted as unknown)
   PoseLimits limits;
+  // Solver wall-clock budget per step, s (0 = none); < 0 keeps the scene's. A step that
+  // runs out returns SOLVER_TIME_BUDGET_EXCEEDED with the forces it has.
+  double time_budget_s = -1.0;
   bool log = true;               // rate-limited stderr log of bad input and sessions
   // Optional step trace (CSV, one row per step: client, sequence, position, force sent);
   // for tests and debugging. Not owned.

@@ -35,13 +35,14 @@ hapco_idl_Vec3 ToIdl(const Eigen::Vector3d& v) { return {v.x(), v.y(), v.z()}; }
 Session::Session(std::string client_id, const sim::TwoBodyModel& model,
                  const Participant& participant,
                  const Topic<hapco_idl_FeedbackForce>& force_topic,
-                 const Topic<hapco_idl_ContactStateFrame>& contact_topic)
+                 const Topic<hapco_idl_ContactStateFrame>& contact_topic, double time_budget_s)
     : client_id_(std::move(client_id)),
       sim_(model),
       publisher_(participant, ClientPartition(client_id_)),
       force_writer_(publisher_, force_topic),
       contact_writer_(publisher_, contact_topic),
       frame_(MakeSample<hapco_idl_ContactStateFrame>()) {
+  if (time_budget_s >= 0) sim_.parameters.time_budget_s = time_budget_s;
   SetClientId(force_.client_id, client_id_);
   SetClientId(frame_->client_id, client_id_);
   const auto capacity = static_cast<uint32_t>(

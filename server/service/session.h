@@ -47,10 +47,11 @@ struct SessionCounters {
 
 class Session {
  public:
-  // Throws DdsError if the writers cannot be created.
+  // Throws DdsError if the writers cannot be created. time_budget_s >= 0 replaces the scene's
+  // solver time budget (the haptic deadline; 0 = none), < 0 keeps the scene's.
   Session(std::string client_id, const sim::TwoBodyModel& model, const Participant& participant,
           const Topic<hapco_idl_FeedbackForce>& force_topic,
-          const Topic<hapco_idl_ContactStateFrame>& contact_topic);
+          const Topic<hapco_idl_ContactStateFrame>& contact_topic, double time_budget_s = -1.0);
 
   const std::string& client_id() const { return client_id_; }
 

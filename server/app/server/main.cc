@@ -39,6 +39,9 @@ opens on a SESSION_JOIN or on the client's first valid pose. Bad input is counte
   --max-jump-m X      largest plausible position change per pose, m (default 0.002);
                       a larger jump is ignored (the client keeps its last force)
   --workspace-m X     poses with |position| > X m are ignored (default 0.1)
+  --time-budget-ms X  solver wall-clock budget per step, ms (0 = none; default: the scene's
+                      solver.time_budget_s); a step out of time answers with the forces it has
+                      and status SOLVER_TIME_BUDGET_EXCEEDED
   --trace FILE        write one CSV row per step (client_id, sequence, position, force sent,
                       step time) for debugging and tests
   --rt-priority N     run the server thread (and DDS's threads) with SCHED_FIFO priority N
@@ -99,6 +102,14 @@ Options Parse(int argc, char** argv) {
       options.server.limits.workspace_m = ParsePositive("--workspace-m", value());
     } else if (arg == "--rt-priority") {
       options.rt_priority = ParseInt("--rt-priority", value(), 0, 99);
+    } else if (arg == "--time-budget-ms") {
+      const char* text = value();
+      char* end = nullptr;
+      const double ms = std::strtod(text, &end);
+      if (end == text || *end != '\0' || !std::isfinite(ms) || ms < 0) {
+        throw hapco::InputError(std::string("--time-budget-ms expects a number >= 0, got '") + text + "'");
+      }
+      options.server.time_budget_s = ms * 1e-3;
     } else if (arg == "--trace") {
       options.trace_path = value();
     } else if (arg == "--quiet") {
