@@ -44,7 +44,7 @@ struct ServerCounters {
   uint64_t non_finite_forces = 0;   // solve gave NaN/Inf; the last good force was sent
   uint64_t force_write_errors = 0;
   uint64_t contact_frames_dropped = 0;
-  uint64_t sequence_gaps = 0;       // poses never seen (lost or overwritten before the take)
+  uint64_t sequence_gaps = 0;       // sequences never stepped (superseded + lost + overwritten)
   uint64_t sessions_opened = 0;
   uint64_t sessions_closed = 0;
   uint64_t status_published = 0;

@@ -41,8 +41,9 @@ struct SessionCounters {
   uint64_t force_write_errors = 0;
   uint64_t contact_frames_dropped = 0; // DDS_RETCODE_TIMEOUT (or other error) on the frame
   uint64_t contacts_truncated = 0;     // frames with more contacts than the IDL bound
-  uint64_t sequence_gaps = 0;          // sequence numbers never seen between accepted poses
-                                       // (lost on the network or overwritten in the reader)
+  uint64_t sequence_gaps = 0;          // sequence numbers skipped between stepped poses:
+                                       // superseded (also counted there), lost on the
+                                       // network, or overwritten in the reader
 };
 
 class Session {
