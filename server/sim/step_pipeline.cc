@@ -31,7 +31,11 @@ TwoBodySession::TwoBodySession(const TwoBodyModel& model, SolveMode mode)
   obstacle_slots_.resize(static_cast<std::size_t>(max_contacts_));
   world_forces_n_.resize(3 * max_contacts_);
   if (mode_ == SolveMode::kPrecomputed) {
-    spread_.resize(model.obstacle_compliance_m_per_n().rows(), 3 * max_contacts_);
+    const auto num_candidates = static_cast<Eigen::Index>(model.obstacle_candidates().size());
+    spread_.resize(3 * num_candidates, 3 * max_contacts_);
+    obstacle_force_n_.resize(3 * num_candidates);
+    slot_loaded_.assign(static_cast<std::size_t>(num_candidates), 0);
+    active_slots_.reserve(static_cast<std::size_t>(num_candidates));
   }
   Reset();
 }
@@ -185,16 +189,15 @@ void TwoBodySession::AssembleProblem(const Eigen::MatrixXd& tool_compliance,
   const auto& obstacle_reference = model_.obstacle().mesh().nodes_m;
   const auto& tool_index = model_.tool_candidate_index();
   const auto& obstacle_index = model_.obstacle_candidate_index();
-  // Spread of the obstacle compliance by each contact's weights (world axes):
-  //     S_β = Σ_l w_βl C_obstacle(:, j_l)            (3n_o × 3 per contact)
-  // Three adjacent columns of a column-major matrix are one contiguous run, so this is six
-  // vectorised axpys per contact. It turns the 6 × 6 block double sum of every pair into six
-  // blocks, W_obs(α, β) = Σ_k w_αk S_β(i_k, :), and it is reused by the displacement update
-  // (U_obstacle = −Σ_β S_β r_β). Sized once per session in kPrecomputed mode.
-  const Eigen::Index spread_rows = obstacle_compliance.rows();
-  if (spread_.rows() != spread_rows || spread_.cols() < 3 * m) {
-    spread_.resize(spread_rows, std::max<Eigen::Index>(3 * m, 3 * max_contacts_));
-  }
+  // Two exact ways to gather the obstacle part of W (same sums, different order), chosen per
+  // step by their multiply-add counts (n = obstacle nodes per contact, R = rows of C):
+  //   spread: S_β = Σ_l w_βl C_obstacle(:, j_l) for every contact (n·R·3 per contact; three
+  //           adjacent columns of a column-major matrix are one contiguous run, so these are
+  //           vectorised axpys), then W_obs(α, β) = Σ_k w_αk S_β(i_k, :): n blocks per pair.
+  //           S is reused by the update (U_obstacle = −Σ_β S_β f_β, 3m·R).
+  //   pairs:  W_obs(α, β) = Σ_k Σ_l w_αk w_βl C(i_k, j_l): n² blocks per pair, and the update
+  //           from the compliance columns of the loaded nodes only (3·R per active node).
+  // The spread wins for many contacts (81 on a Tet10 tool: 1.4x), the pairs for few (25).
   for (int alpha = 0; alpha < m; ++alpha) {
     const ContactPoint& a = contacts_[alpha];
     std::array<int, 6>& slots = obstacle_slots_[static_cast<std::size_t>(alpha)];
@@ -202,11 +205,27 @@ void TwoBodySession::AssembleProblem(const Eigen::MatrixXd& tool_compliance,
       slots[static_cast<std::size_t>(k)] =
           obstacle_map[static_cast<std::size_t>(a.obstacle_nodes[static_cast<std::size_t>(k)])];
     }
-    auto spread = spread_.middleCols<3>(3 * alpha);
-    spread.noalias() = a.weights[0] * obstacle_compliance.middleCols<3>(3 * slots[0]);
-    for (int k = 1; k < a.num_obstacle_nodes; ++k) {
-      spread.noalias() += a.weights[static_cast<std::size_t>(k)] *
-                          obstacle_compliance.middleCols<3>(3 * slots[static_cast<std::size_t>(k)]);
+  }
+  const double rows = static_cast<double>(obstacle_compliance.rows());
+  const double n = m > 0 ? static_cast<double>(contacts_[0].num_obstacle_nodes) : 0.0;
+  const double md = static_cast<double>(m);
+  const double spread_cost = md * n * rows * 3 + md * n * 9 * (md + 1) / 2 + 3 * md * rows;
+  const double pairs_cost = n * n * 9 * md * (md + 1) / 2 + std::min(md * n, rows / 3) * 3 * rows;
+  use_spread_ = spread_cost < pairs_cost;
+  if (use_spread_) {
+    const Eigen::Index spread_rows = obstacle_compliance.rows();
+    if (spread_.rows() != spread_rows || spread_.cols() < 3 * m) {
+      spread_.resize(spread_rows, std::max<Eigen::Index>(3 * m, 3 * max_contacts_));
+    }
+    for (int alpha = 0; alpha < m; ++alpha) {
+      const ContactPoint& a = contacts_[alpha];
+      const std::array<int, 6>& slots = obstacle_slots_[static_cast<std::size_t>(alpha)];
+      auto spread = spread_.middleCols<3>(3 * alpha);
+      spread.noalias() = a.weights[0] * obstacle_compliance.middleCols<3>(3 * slots[0]);
+      for (int k = 1; k < a.num_obstacle_nodes; ++k) {
+        spread.noalias() += a.weights[static_cast<std::size_t>(k)] *
+                            obstacle_compliance.middleCols<3>(3 * slots[static_cast<std::size_t>(k)]);
+      }
     }
   }
 
@@ -235,9 +254,22 @@ void TwoBodySession::AssembleProblem(const Eigen::MatrixXd& tool_compliance,
       const ContactPoint& b = contacts_[beta];
       const int tb = tool_map[static_cast<std::size_t>(b.tool_node)];
       Eigen::Matrix3d world = tool_compliance.block<3, 3>(3 * ta, 3 * tb);
-      for (int k = 0; k < a.num_obstacle_nodes; ++k) {
-        world.noalias() += a.weights[static_cast<std::size_t>(k)] *
-                           spread_.block<3, 3>(3 * slots[static_cast<std::size_t>(k)], 3 * beta);
+      if (use_spread_) {
+        for (int k = 0; k < a.num_obstacle_nodes; ++k) {
+          world.noalias() += a.weights[static_cast<std::size_t>(k)] *
+                             spread_.block<3, 3>(3 * slots[static_cast<std::size_t>(k)], 3 * beta);
+        }
+      } else {
+        const std::array<int, 6>& other = obstacle_slots_[static_cast<std::size_t>(beta)];
+        for (int k = 0; k < a.num_obstacle_nodes; ++k) {
+          Eigen::Matrix3d row_sum = b.weights[0] * obstacle_compliance.block<3, 3>(3 * slots[static_cast<std::size_t>(k)], 3 * other[0]);
+          for (int l = 1; l < b.num_obstacle_nodes; ++l) {
+            row_sum.noalias() += b.weights[static_cast<std::size_t>(l)] *
+                                 obstacle_compliance.block<3, 3>(3 * slots[static_cast<std::size_t>(k)],
+                                                                 3 * other[static_cast<std::size_t>(l)]);
+          }
+          world.noalias() += a.weights[static_cast<std::size_t>(k)] * row_sum;
+        }
       }
       const Eigen::Matrix3d local = a.frame * world * b.frame.transpose();
       problem_.flexibility_m_per_n.block<3, 3>(3 * alpha, 3 * beta) = local;
@@ -248,9 +280,10 @@ void TwoBodySession::AssembleProblem(const Eigen::MatrixXd& tool_compliance,
 
 void TwoBodySession::UpdatePrecomputed() {
   // U = U_free(d) + C f over the candidate nodes (algorithms.md §5, §6). The obstacle carries
-  // −w_βl f_β at the nodes of contact β, so U_obstacle = −Σ_β S_β f_β with the spread blocks
-  // of AssembleProblem (one matrix-vector product over the active columns, no allocation);
-  // the tool carries f_β at its node, so only the active compliance columns are touched.
+  // −w_βl f_β at the nodes of contact β: with the spread, U_obstacle = −Σ_β S_β f_β (one
+  // matrix-vector product); otherwise the compliance columns of the loaded nodes only. The
+  // tool carries f_β at its node, so only its active compliance columns are touched. No
+  // allocation either way.
   const int m = static_cast<int>(contacts_.size());
   const auto& tool_index = model_.tool_candidate_index();
   const Eigen::MatrixXd& tool_compliance = model_.tool_compliance_m_per_n();
@@ -265,8 +298,32 @@ void TwoBodySession::UpdatePrecomputed() {
     world_forces_n_.segment<3>(3 * alpha) = -world_n;
     tool_candidate_displacement_m_.noalias() += tool_compliance.middleCols<3>(3 * ia) * world_n;
   }
-  obstacle_candidate_displacement_m_.noalias() =
-      spread_.leftCols(3 * m) * world_forces_n_.head(3 * m);
+  if (use_spread_) {
+    obstacle_candidate_displacement_m_.noalias() = spread_.leftCols(3 * m) * world_forces_n_.head(3 * m);
+    return;
+  }
+  // Nodal obstacle forces on the loaded nodes, then their compliance columns only.
+  const Eigen::MatrixXd& obstacle_compliance = model_.obstacle_compliance_m_per_n();
+  active_slots_.clear();
+  for (int alpha = 0; alpha < m; ++alpha) {
+    const ContactPoint& a = contacts_[alpha];
+    for (int k = 0; k < a.num_obstacle_nodes; ++k) {
+      const int slot = obstacle_slots_[static_cast<std::size_t>(alpha)][static_cast<std::size_t>(k)];
+      if (!slot_loaded_[static_cast<std::size_t>(slot)]) {
+        slot_loaded_[static_cast<std::size_t>(slot)] = 1;
+        active_slots_.push_back(slot);
+        obstacle_force_n_.segment<3>(3 * slot).setZero();
+      }
+      obstacle_force_n_.segment<3>(3 * slot) +=
+          a.weights[static_cast<std::size_t>(k)] * world_forces_n_.segment<3>(3 * alpha);
+    }
+  }
+  obstacle_candidate_displacement_m_.setZero();
+  for (int slot : active_slots_) {
+    obstacle_candidate_displacement_m_.noalias() +=
+        obstacle_compliance.middleCols<3>(3 * slot) * obstacle_force_n_.segment<3>(3 * slot);
+    slot_loaded_[static_cast<std::size_t>(slot)] = 0;
+  }
 }
 
 void TwoBodySession::NodalContactForces(Eigen::VectorXd* obstacle_n, Eigen::VectorXd* tool_n) const {

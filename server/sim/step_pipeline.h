@@ -118,6 +118,13 @@ class TwoBodySession {
   std::vector<std::array<int, 6>> obstacle_slots_;
   // Minus the world contact force of each contact (3m_max, N): the obstacle's share.
   Eigen::VectorXd world_forces_n_;
+  // This step's W gather: spread (true) or pairs (false), see AssembleProblem.
+  bool use_spread_ = false;
+  // kPrecomputed update without the spread: nodal obstacle forces (3n_o, N, valid on the
+  // loaded slots only), a loaded flag per candidate slot and the list of loaded slots.
+  Eigen::VectorXd obstacle_force_n_;
+  std::vector<char> slot_loaded_;
+  std::vector<int> active_slots_;
 };
 
 }  // namespace hapco::sim
