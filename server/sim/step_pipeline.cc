@@ -22,6 +22,10 @@ TwoBodySession::TwoBodySession(const TwoBodyModel& model, SolveMode mode)
   solver = model.scene().solver;
   parameters = model.scene().solver_parameters;
   collision_.activation_gap_m = model.scene().activation_gap_m;
+  // A tool node predicted deep inside the obstacle (a large device increment, or a step whose
+  // solve failed) must still find the face it went through, or the tool would pass through
+  // for good; beyond half the thickness it would face the opposite side instead.
+  collision_.max_penetration_m = 0.45 * model.obstacle_thickness_m();
   // Every workspace of the haptic path is sized here for the most contacts the scene can have
   // (one per tool candidate node), so Step allocates only when m changes (W, ũ, μ).
   max_contacts_ = static_cast<int>(model.tool_candidates().size());

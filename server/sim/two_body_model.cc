@@ -64,6 +64,7 @@ TwoBodyModel::TwoBodyModel(SceneSpec scene)
   // Obstacle candidates: faces on the facing side, within the swept footprint.
   const fem::BoxFace obstacle_face = FacingObstacleFace(obstacle_box, tool_box);
   const int normal_axis = static_cast<int>(obstacle_face) / 2;
+  obstacle_thickness_m_ = obstacle_box.size_m[normal_axis];
   Eigen::Vector3d sweep_min = Eigen::Vector3d::Zero(), sweep_max = Eigen::Vector3d::Zero();
   for (int step = 1; step <= scene_.total_steps(); ++step) {
     const Eigen::Vector3d d = scene_.DeviceTranslationAtStep(step);

@@ -55,6 +55,10 @@ class TwoBodyModel {
   // Tool candidate displacement per unit device translation (3n_t x 3, m/m).
   const Eigen::MatrixXd& tool_unit_fields() const { return tool_unit_fields_; }
 
+  // Obstacle thickness along the normal of its facing face, m: deeper penetrations than about
+  // half of it would be matched to the opposite face, so it bounds the detector's search.
+  double obstacle_thickness_m() const { return obstacle_thickness_m_; }
+
   const TwoBodyModelStats& stats() const { return stats_; }
 
  private:
@@ -67,6 +71,7 @@ class TwoBodyModel {
   std::vector<int> tool_candidates_, tool_candidate_index_;
   std::vector<Eigen::Vector3d> tool_normals_;
   Eigen::MatrixXd obstacle_compliance_, tool_compliance_, tool_unit_fields_;
+  double obstacle_thickness_m_ = 0.0;
   TwoBodyModelStats stats_;
 };
 
