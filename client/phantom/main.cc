@@ -16,7 +16,9 @@
 #include <string>
 #include <vector>
 
+#include "common/cli.h"
 #include "common/error.h"
+#include "common/realtime.h"
 #include "io/scene_file.h"
 #include "phantom.h"
 #include "service/dds.h"
@@ -58,15 +60,6 @@ struct Options {
   double duration_s = 0, timeout_ms = 50, connect_timeout_s = 30;
 };
 
-double ParsePositive(const char* flag, const char* text) {
-  char* end = nullptr;
-  const double value = std::strtod(text, &end);
-  if (end == text || *end != '\0' || !std::isfinite(value) || value <= 0) {
-    throw hapco::InputError(std::string(flag) + " expects a number > 0, got '" + text + "'");
-  }
-  return value;
-}
-
 Options Parse(int argc, char** argv) {
   Options o;
   for (int i = 1; i < argc; ++i) {
@@ -92,11 +85,11 @@ Options Parse(int argc, char** argv) {
     } else if (arg == "--trajectory") {
       o.trajectory = value();
     } else if (arg == "--duration") {
-      o.duration_s = ParsePositive("--duration", value());
+      o.duration_s = hapco::cli::ParsePositive("--duration", value());
     } else if (arg == "--csv") {
       o.csv_path = value();
     } else if (arg == "--timeout-ms") {
-      o.timeout_ms = ParsePositive("--timeout-ms", value());
+      o.timeout_ms = hapco::cli::ParsePositive("--timeout-ms", value());
     } else if (arg == "--rt-priority") {
       char* end = nullptr;
       const char* text = value();
@@ -104,7 +97,7 @@ Options Parse(int argc, char** argv) {
       if (end == text || *end != '\0' || priority < 0 || priority > 99) throw hapco::InputError("--rt-priority expects 0..99");
       o.rt_priority = static_cast<int>(priority);
     } else if (arg == "--connect-timeout-s") {
-      o.connect_timeout_s = ParsePositive("--connect-timeout-s", value());
+      o.connect_timeout_s = hapco::cli::ParsePositive("--connect-timeout-s", value());
     } else if (!arg.empty() && arg[0] == '-') {
       throw hapco::InputError("unknown option " + arg + " (see --help)");
     } else if (o.scene_path.empty()) {
@@ -147,26 +140,6 @@ std::vector<Eigen::Vector3d> LoadTrajectory(const Options& o, const hapco::sim::
   return points;
 }
 
-// SCHED_FIFO at `priority` for the calling thread, before the DDS participant exists so that
-// Cyclone's threads inherit it (platform-notes.md: chrt -f 80 cut the max round trip from
-// ~12 ms to ~1.4 ms on the shared machine). Without the privilege: a warning, normal policy.
-void UseRealtimePriority(int priority, const char* program) {
-  if (priority <= 0) return;
-  sched_param param{};
-  param.sched_priority = priority;
-  const int rc = pthread_setschedparam(pthread_self(), SCHED_FIFO, &param);
-  if (rc != 0) {
-    std::fprintf(stderr, "%s: SCHED_FIFO %d not available (%s); running with the normal policy\n", program,
-                 priority, std::strerror(rc));
-  }
-}
-
-int64_t NowNs() {
-  timespec ts{};
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000LL + ts.tv_nsec;
-}
-
 timespec ToTimespec(int64_t ns) {
   return timespec{static_cast<time_t>(ns / 1'000'000'000LL), static_cast<long>(ns % 1'000'000'000LL)};
 }
@@ -203,7 +176,7 @@ int Run(const Options& o) {
                       "fx_n,fy_n,fz_n,round_trip_us\n");
   }
 
-  UseRealtimePriority(o.rt_priority, "hapco-phantom");
+  hapco::UseRealtimePriority(o.rt_priority, "hapco-phantom");
   service::Participant participant(o.domain);
   service::Topic<hapco_idl_DevicePose> pose_topic(participant);
   service::Topic<hapco_idl_FeedbackForce> force_topic(participant);
@@ -255,7 +228,7 @@ int Run(const Options& o) {
   uint64_t missed_ticks = 0, forces_received = 0, write_errors = 0;
   double peak_rendered_n = 0;
   uint64_t last_force_sequence = 0;
-  const int64_t start_ns = NowNs();
+  const int64_t start_ns = hapco::MonotonicNowNs();
   int64_t deadline_ns = start_ns + period_ns;
   Eigen::Vector3d rendered = Eigen::Vector3d::Zero();
   Row pending_row;
@@ -271,7 +244,7 @@ int Run(const Options& o) {
     const timespec wake = ToTimespec(deadline_ns);
     while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &wake, nullptr) != 0) {
     }
-    const int64_t now = NowNs();
+    const int64_t now = hapco::MonotonicNowNs();
     if (now - deadline_ns > period_ns) {
       // Overrun: count the ticks that never ran and realign to the grid (no burst of poses).
       const int64_t late = (now - deadline_ns) / period_ns;
@@ -294,7 +267,7 @@ int Run(const Options& o) {
         position = phantom::Quantize(hand.Step(trajectory[static_cast<std::size_t>(k)], velocity, rendered, tick_s));
       }
       pose.sequence_number = static_cast<uint64_t>(tick);
-      pose.client_time_ns = NowNs();
+      pose.client_time_ns = hapco::MonotonicNowNs();
       pose.position_m = {position.x(), position.y(), position.z()};
       if (pose_writer.Write(pose) != DDS_RETCODE_OK) ++write_errors;
     }
@@ -308,7 +281,7 @@ int Run(const Options& o) {
       fresh = true;
       last_force_sequence = force.pose_sequence;
       raw = Eigen::Vector3d(force.force_n.x, force.force_n.y, force.force_n.z);
-      const double round_trip_us = static_cast<double>(NowNs() - force.client_time_ns) * 1e-3;
+      const double round_trip_us = static_cast<double>(hapco::MonotonicNowNs() - force.client_time_ns) * 1e-3;
       round_trips_us.push_back(round_trip_us);
       server_us.push_back(static_cast<double>(force.server_send_ns - force.server_receive_ns) * 1e-3);
       if (csv != nullptr && taken++ > 0) FlushRow(csv, tick, publishing, position, pending_row);
@@ -346,13 +319,5 @@ int Run(const Options& o) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  try {
-    return Run(Parse(argc, argv));
-  } catch (const hapco::InputError& error) {
-    std::fprintf(stderr, "hapco-phantom: %s\n", error.what());
-    return 1;
-  } catch (const std::exception& error) {
-    std::fprintf(stderr, "hapco-phantom: unexpected error: %s\n", error.what());
-    return 3;
-  }
+  return hapco::cli::RunMain("hapco-phantom", [&] { return Run(Parse(argc, argv)); });
 }

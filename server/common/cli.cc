@@ -18,6 +18,12 @@ double ParseDouble(std::string_view flag, const char* text) {
   return value;
 }
 
+double ParsePositive(std::string_view flag, const char* text) {
+  const double value = ParseDouble(flag, text);
+  if (!(value > 0)) throw InputError(std::string(flag) + " expects a number > 0, got '" + text + "'");
+  return value;
+}
+
 long ParseInteger(std::string_view flag, const char* text, long minimum, long maximum) {
   char* end = nullptr;
   const long value = std::strtol(text, &end, 10);

@@ -8,6 +8,8 @@ namespace hapco::cli {
 
 // A finite number, else InputError "FLAG expects a number, got 'TEXT'".
 double ParseDouble(std::string_view flag, const char* text);
+// A finite number > 0, else InputError "FLAG expects a number > 0, got 'TEXT'".
+double ParsePositive(std::string_view flag, const char* text);
 // An integer in [minimum, maximum], else InputError naming the flag and the range.
 long ParseInteger(std::string_view flag, const char* text, long minimum, long maximum);
 

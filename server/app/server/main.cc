@@ -16,7 +16,9 @@
 #include <string>
 #include <thread>
 
+#include "common/cli.h"
 #include "common/error.h"
+#include "common/realtime.h"
 #include "common/timer.h"
 #include "io/scene_file.h"
 #include "service/server_loop.h"
@@ -60,25 +62,6 @@ struct Options {
   hapco::service::ServerOptions server;
 };
 
-double ParsePositive(const char* flag, const char* text) {
-  char* end = nullptr;
-  const double value = std::strtod(text, &end);
-  if (end == text || *end != '\0' || !std::isfinite(value) || value <= 0) {
-    throw hapco::InputError(std::string(flag) + " expects a number > 0, got '" + text + "'");
-  }
-  return value;
-}
-
-int ParseInt(const char* flag, const char* text, long low, long high) {
-  char* end = nullptr;
-  const long value = std::strtol(text, &end, 10);
-  if (end == text || *end != '\0' || value < low || value > high) {
-    throw hapco::InputError(std::string(flag) + " expects an integer in [" + std::to_string(low) + ", " +
-                            std::to_string(high) + "], got '" + text + "'");
-  }
-  return static_cast<int>(value);
-}
-
 Options Parse(int argc, char** argv) {
   Options options;
   for (int i = 1; i < argc; ++i) {
@@ -91,24 +74,20 @@ Options Parse(int argc, char** argv) {
       std::fputs(kUsage, stdout);
       std::exit(0);
     } else if (arg == "--domain") {
-      options.domain = ParseInt("--domain", value(), 0, 230);
+      options.domain = static_cast<int>(hapco::cli::ParseInteger("--domain", value(), 0, 230));
     } else if (arg == "--status-period") {
-      options.server.status_period_s = ParsePositive("--status-period", value());
+      options.server.status_period_s = hapco::cli::ParsePositive("--status-period", value());
     } else if (arg == "--max-sessions") {
-      options.server.max_sessions = ParseInt("--max-sessions", value(), 1, 1000);
+      options.server.max_sessions = static_cast<int>(hapco::cli::ParseInteger("--max-sessions", value(), 1, 1000));
     } else if (arg == "--max-jump-m") {
-      options.server.limits.max_jump_m = ParsePositive("--max-jump-m", value());
+      options.server.limits.max_jump_m = hapco::cli::ParsePositive("--max-jump-m", value());
     } else if (arg == "--workspace-m") {
-      options.server.limits.workspace_m = ParsePositive("--workspace-m", value());
+      options.server.limits.workspace_m = hapco::cli::ParsePositive("--workspace-m", value());
     } else if (arg == "--rt-priority") {
-      options.rt_priority = ParseInt("--rt-priority", value(), 0, 99);
+      options.rt_priority = static_cast<int>(hapco::cli::ParseInteger("--rt-priority", value(), 0, 99));
     } else if (arg == "--time-budget-ms") {
-      const char* text = value();
-      char* end = nullptr;
-      const double ms = std::strtod(text, &end);
-      if (end == text || *end != '\0' || !std::isfinite(ms) || ms < 0) {
-        throw hapco::InputError(std::string("--time-budget-ms expects a number >= 0, got '") + text + "'");
-      }
+      const double ms = hapco::cli::ParseDouble("--time-budget-ms", value());
+      if (ms < 0) throw hapco::InputError("--time-budget-ms expects a number >= 0");
       options.server.time_budget_s = ms * 1e-3;
     } else if (arg == "--trace") {
       options.trace_path = value();
@@ -124,20 +103,6 @@ Options Parse(int argc, char** argv) {
   }
   if (options.scene_path.empty()) throw hapco::InputError("missing SCENE argument (see --help)");
   return options;
-}
-
-// SCHED_FIFO at `priority` for the calling thread, before the DDS participant exists so that
-// Cyclone's threads inherit it (platform-notes.md: chrt -f 80 cut the max round trip from
-// ~12 ms to ~1.4 ms on the shared machine). Without the privilege: a warning, normal policy.
-void UseRealtimePriority(int priority, const char* program) {
-  if (priority <= 0) return;
-  sched_param param{};
-  param.sched_priority = priority;
-  const int rc = pthread_setschedparam(pthread_self(), SCHED_FIFO, &param);
-  if (rc != 0) {
-    std::fprintf(stderr, "%s: SCHED_FIFO %d not available (%s); running with the normal policy\n", program,
-                 priority, std::strerror(rc));
-  }
 }
 
 // Self-pipe: the handler only write()s the signal number (async-signal-safe); a thread
@@ -171,7 +136,7 @@ int Run(const Options& options) {
     std::fprintf(trace.get(), "client_id,sequence,x_m,y_m,z_m,fx_n,fy_n,fz_n,step_us\n");
     server_options.trace = trace.get();
   }
-  UseRealtimePriority(options.rt_priority, "hapco-server");
+  hapco::UseRealtimePriority(options.rt_priority, "hapco-server");
   hapco::service::ServerLoop server(model, options.domain, server_options);
   std::printf("hapco-server: scene %s (%zu tool candidate nodes), domain %d, ready in %.2f s\n",
               scene.name.c_str(), model.tool_candidates().size(), options.domain, setup.ElapsedSeconds());
@@ -205,13 +170,5 @@ int Run(const Options& options) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  try {
-    return Run(Parse(argc, argv));
-  } catch (const hapco::InputError& error) {
-    std::fprintf(stderr, "hapco-server: %s\n", error.what());
-    return 1;
-  } catch (const std::exception& error) {
-    std::fprintf(stderr, "hapco-server: unexpected error: %s\n", error.what());
-    return 3;
-  }
+  return hapco::cli::RunMain("hapco-server", [&] { return Run(Parse(argc, argv)); });
 }
