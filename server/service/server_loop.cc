@@ -7,15 +7,10 @@
 #include <ctime>
 
 #include "common/error.h"
+#include "common/realtime.h"
 
 namespace hapco::service {
 namespace {
-
-int64_t NowNs() {
-  timespec ts{};
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000LL + ts.tv_nsec;
-}
 
 constexpr dds_attach_t kPoseToken = 1;
 constexpr dds_attach_t kSessionToken = 2;
@@ -94,7 +89,7 @@ ServerLoop::ServerLoop(const sim::TwoBodyModel& model, dds_domainid_t domain_id,
   waitset_.Attach(pose_reader_.data_condition(), kPoseToken);
   waitset_.Attach(session_reader_.data_condition(), kSessionToken);
   step_times_us_.reserve(8192);
-  start_ns_ = NowNs();
+  start_ns_ = MonotonicNowNs();
 }
 
 ServerLoop::~ServerLoop() {
@@ -109,22 +104,22 @@ void ServerLoop::RequestStop() {
 
 void ServerLoop::Run() {
   const auto period_ns = static_cast<int64_t>(options_.status_period_s * 1e9);
-  int64_t next_status_ns = NowNs() + period_ns;
-  PublishStatus(NowNs());
+  int64_t next_status_ns = MonotonicNowNs() + period_ns;
+  PublishStatus(MonotonicNowNs());
   dds_attach_t tokens[4];
   while (!stop_.load()) {
-    const int64_t wait_ns = std::max<int64_t>(0, next_status_ns - NowNs());
+    const int64_t wait_ns = std::max<int64_t>(0, next_status_ns - MonotonicNowNs());
     waitset_.Wait(wait_ns, tokens, 4);
     if (stop_.load()) break;
     ProcessSessionControls();
     ProcessPoses();
-    const int64_t now = NowNs();
+    const int64_t now = MonotonicNowNs();
     if (now >= next_status_ns) {
       PublishStatus(now);
       next_status_ns = now + period_ns;
     }
   }
-  PublishStatus(NowNs());
+  PublishStatus(MonotonicNowNs());
 }
 
 ServerLoop::Client* ServerLoop::OpenSession(const std::string& client_id) {
@@ -215,7 +210,7 @@ void ServerLoop::ProcessPoses() {
   hapco_idl_DevicePose pose{};
   // Take everything available; keep the newest valid pose per client.
   while (pose_reader_.Take(&pose)) {
-    const int64_t receive_ns = NowNs();
+    const int64_t receive_ns = MonotonicNowNs();
     const std::string id = IdOf(pose.client_id);
     if (!ValidId(id)) {
       ++counters_.invalid_client_ids;
@@ -327,7 +322,7 @@ std::string ServerLoop::Summary() const {
 void ServerLoop::Log(int kind, const std::string& message) {
   if (!options_.log) return;
   const auto k = static_cast<std::size_t>(kind);
-  const int64_t now = NowNs();
+  const int64_t now = MonotonicNowNs();
   // At most one line per kind per second; the number of suppressed lines is reported.
   if (last_log_ns_[k] != 0 && now - last_log_ns_[k] < 1'000'000'000LL) {
     ++suppressed_logs_[k];

@@ -4,16 +4,11 @@
 #include <cmath>
 #include <ctime>
 
+#include "common/realtime.h"
 #include "contact/projection.h"
 
 namespace hapco::service {
 namespace {
-
-int64_t MonotonicNs() {
-  timespec ts{};
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000LL + ts.tv_nsec;
-}
 
 hapco_idl_SolverStatus ToIdl(contact::SolverStatus status, int contacts) {
   if (contacts == 0) return hapco_idl_SOLVER_NO_CONTACT;
@@ -107,40 +102,35 @@ int64_t Session::StepAndPublish(const hapco_idl_DevicePose& pose, int64_t receiv
   force_.separating_count = static_cast<uint32_t>(out.state_counts[0]);
   force_.sticking_count = static_cast<uint32_t>(out.state_counts[1]);
   force_.sliding_count = static_cast<uint32_t>(out.state_counts[2]);
-  force_.server_send_ns = MonotonicNs();
+  force_.server_send_ns = MonotonicNowNs();
   if (force_writer_.Write(force_) != DDS_RETCODE_OK) ++counters_.force_write_errors;
   // The contact frame goes after the force: the force is the latency-critical sample.
   FillContactFrame(pose.sequence_number);
   if (contact_writer_.Write(*frame_) != DDS_RETCODE_OK) ++counters_.contact_frames_dropped;
-  return MonotonicNs() - receive_ns;
+  return MonotonicNowNs() - receive_ns;
 }
 
 void Session::FillContactFrame(uint64_t pose_sequence) {
   frame_->step = counters_.steps;
   frame_->pose_sequence = pose_sequence;
   const auto& contacts = sim_.contacts();
-  const auto& result = sim_.last_result();
   const uint32_t capacity = frame_->contacts._maximum;
   if (contacts.size() > capacity) ++counters_.contacts_truncated;
   const auto n = static_cast<uint32_t>(std::min<std::size_t>(contacts.size(), capacity));
+  const auto& result = sim_.last_result();
   const bool have_result = result.force_n.size() >= 3 * static_cast<Eigen::Index>(n) &&
                            result.displacement_m.size() >= 3 * static_cast<Eigen::Index>(n);
-  const double force_scale_n =
-      result.force_n.size() > 0 ? result.force_n.cwiseAbs().maxCoeff() : 0.0;
   uint32_t written = 0;
   for (uint32_t alpha = 0; alpha < n && have_result; ++alpha) {
-    const auto& contact = contacts[alpha];
-    const Eigen::Vector3d r = result.force_n.segment<3>(3 * static_cast<Eigen::Index>(alpha));
-    const Eigen::Vector3d u = result.displacement_m.segment<3>(3 * static_cast<Eigen::Index>(alpha));
+    const sim::ContactSample sample = sim_.SampleContact(static_cast<int>(alpha));
     hapco_idl_ContactSample& s = frame_->contacts._buffer[written++];
-    s.id = static_cast<uint32_t>(contact.tool_node);
-    s.position_m = ToIdl(contact.obstacle_point_m);
-    s.normal = ToIdl(contact.frame.row(0).transpose());
-    s.force_n = ToIdl(contact.frame.transpose() * r);
-    s.gap_m = u[0];
-    s.slip_m = u.tail<2>().norm();
-    s.state = static_cast<hapco_idl_ContactState>(contact::ClassifyContact(
-        r, u, 1e-9 * force_scale_n, sim_.parameters.global_tolerance_m));
+    s.id = static_cast<uint32_t>(sample.tool_node);
+    s.position_m = ToIdl(sample.position_m);
+    s.normal = ToIdl(sample.normal);
+    s.force_n = ToIdl(sample.force_n);
+    s.gap_m = sample.gap_m;
+    s.slip_m = sample.slip_m;
+    s.state = static_cast<hapco_idl_ContactState>(sample.state);
   }
   frame_->contacts._length = written;
 }

@@ -330,6 +330,24 @@ void TwoBodySession::UpdatePrecomputed() {
   }
 }
 
+ContactSample TwoBodySession::SampleContact(int alpha) const {
+  HAPCO_ASSERT(alpha >= 0 && alpha < static_cast<int>(contacts_.size()) && 3 * alpha + 3 <= result_.force_n.size(),
+               "contact index out of range");
+  const ContactPoint& contact = contacts_[static_cast<std::size_t>(alpha)];
+  const Eigen::Vector3d r = result_.force_n.segment<3>(3 * alpha);
+  const Eigen::Vector3d u = result_.displacement_m.segment<3>(3 * alpha);
+  ContactSample sample;
+  sample.tool_node = contact.tool_node;
+  sample.position_m = contact.obstacle_point_m;
+  sample.normal = contact.frame.row(0).transpose();
+  sample.force_n = contact.frame.transpose() * r;
+  sample.gap_m = u[0];
+  sample.slip_m = u.tail<2>().norm();
+  const double tolerance_m = parameters.global_tolerance_m;
+  sample.state = contact::ClassifyContact(r, u, result_.stats.rho * tolerance_m, tolerance_m);
+  return sample;
+}
+
 void TwoBodySession::NodalContactForces(Eigen::VectorXd* obstacle_n, Eigen::VectorXd* tool_n) const {
   *obstacle_n = Eigen::VectorXd::Zero(model_.obstacle().num_dofs());
   *tool_n = Eigen::VectorXd::Zero(model_.tool().num_dofs());

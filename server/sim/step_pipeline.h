@@ -52,6 +52,17 @@ struct StepOutput {
   double total_seconds = 0.0;
 };
 
+// One active contact after a step, in world axes (for recordings, DDS frames, VTK).
+struct ContactSample {
+  int tool_node = -1;                                        // stable while the pair persists
+  Eigen::Vector3d position_m = Eigen::Vector3d::Zero();      // obstacle point
+  Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();         // unit, towards the tool
+  Eigen::Vector3d force_n = Eigen::Vector3d::Zero();         // contact force on the tool
+  double gap_m = 0.0;                                        // u_n after the solve
+  double slip_m = 0.0;                                       // ||u_t||, slip increment of the step
+  contact::ContactState state = contact::ContactState::kSeparating;
+};
+
 // The mutable state of one simulated interaction on an immutable model (design.md ex. 4).
 class TwoBodySession {
  public:
@@ -72,6 +83,11 @@ class TwoBodySession {
   // The contact problem of the last step (plain data: save it, replay it) and its solution.
   const contact::ContactProblem& last_problem() const { return problem_; }
   const contact::SolverResult& last_result() const { return result_; }
+  // Contact alpha of the last step (0 <= alpha < contacts().size()). The state uses the
+  // solver's tolerances (force ρ·ε₁, slip ε₁), so the samples add up to
+  // StepOutput::state_counts (exactly with the paper's single ρ; with per-contact ρ the
+  // smallest ρ_α is used).
+  ContactSample SampleContact(int alpha) const;
 
   // Full displacement fields (3N each, m) of the current state: one solve per body with the
   // stored factors. For visualisation and checks, not for the haptic loop.

@@ -126,20 +126,10 @@ void WriteVtkStep(const std::string& dir, int step, const hapco::sim::TwoBodySes
   write_body("obstacle", 0, model.obstacle().mesh(), obstacle_u, obstacle_f);
   write_body("tool", 1, model.tool().mesh(), tool_u, tool_f);
   std::vector<hapco::io::ContactPointRecord> records;
-  const auto& result = session.last_result();
-  const double force_scale_n = result.force_n.size() > 0 ? result.force_n.cwiseAbs().maxCoeff() : 0.0;
-  for (std::size_t alpha = 0; alpha < session.contacts().size(); ++alpha) {
-    const auto& contact = session.contacts()[alpha];
-    const Eigen::Vector3d r = result.force_n.segment<3>(3 * static_cast<Eigen::Index>(alpha));
-    const Eigen::Vector3d u = result.displacement_m.segment<3>(3 * static_cast<Eigen::Index>(alpha));
-    hapco::io::ContactPointRecord record;
-    record.position_m = contact.obstacle_point_m;
-    record.normal = contact.frame.row(0).transpose();
-    record.force_n = contact.frame.transpose() * r;
-    record.state = static_cast<int>(hapco::contact::ClassifyContact(
-        r, u, 1e-9 * force_scale_n, session.parameters.global_tolerance_m));
-    record.gap_m = u[0];
-    records.push_back(record);
+  for (int alpha = 0; alpha < static_cast<int>(session.contacts().size()); ++alpha) {
+    const hapco::sim::ContactSample sample = session.SampleContact(alpha);
+    records.push_back({sample.position_m, sample.normal, sample.force_n, static_cast<int>(sample.state),
+                       sample.gap_m});
   }
   std::snprintf(name, sizeof(name), "contacts_%05d.vtu", step);
   hapco::io::WriteContactsVtu(dir + "/" + name, records);
@@ -175,21 +165,16 @@ hapco::recording::Step MakeStepRecord(const hapco::sim::StepOutput& out, int pha
   record.set_separating(static_cast<std::uint32_t>(out.state_counts[0]));
   record.set_sticking(static_cast<std::uint32_t>(out.state_counts[1]));
   record.set_sliding(static_cast<std::uint32_t>(out.state_counts[2]));
-  const auto& result = session.last_result();
-  const double force_scale_n = result.force_n.size() > 0 ? result.force_n.cwiseAbs().maxCoeff() : 0.0;
-  for (std::size_t alpha = 0; alpha < session.contacts().size(); ++alpha) {
-    const auto& contact = session.contacts()[alpha];
-    const Eigen::Vector3d r = result.force_n.segment<3>(3 * static_cast<Eigen::Index>(alpha));
-    const Eigen::Vector3d u = result.displacement_m.segment<3>(3 * static_cast<Eigen::Index>(alpha));
+  for (int alpha = 0; alpha < static_cast<int>(session.contacts().size()); ++alpha) {
+    const hapco::sim::ContactSample contact = session.SampleContact(alpha);
     auto* sample = record.add_contacts();
     sample->set_id(static_cast<std::uint32_t>(contact.tool_node));
-    *sample->mutable_position_m() = ToVec3(contact.obstacle_point_m);
-    *sample->mutable_normal() = ToVec3(contact.frame.row(0).transpose());
-    *sample->mutable_force_n() = ToVec3(contact.frame.transpose() * r);
-    sample->set_gap_m(u[0]);
-    sample->set_slip_m(u.tail<2>().norm());
-    sample->set_state(static_cast<hapco::recording::ContactState>(hapco::contact::ClassifyContact(
-        r, u, 1e-9 * force_scale_n, session.parameters.global_tolerance_m)));
+    *sample->mutable_position_m() = ToVec3(contact.position_m);
+    *sample->mutable_normal() = ToVec3(contact.normal);
+    *sample->mutable_force_n() = ToVec3(contact.force_n);
+    sample->set_gap_m(contact.gap_m);
+    sample->set_slip_m(contact.slip_m);
+    sample->set_state(static_cast<hapco::recording::ContactState>(contact.state));
   }
   return record;
 }

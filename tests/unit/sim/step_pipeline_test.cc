@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 
+#include <array>
 #include <cmath>
 #include <limits>
 
@@ -112,6 +113,17 @@ TEST(PipelineTest, ContactForcesStayInTheCoulombCone) {
     }
     const Eigen::Vector3d f = out.contact_force_n;
     EXPECT_LE(std::hypot(f.x(), f.y()), mu * f.z() * (1 + 1e-9) + 1e-12) << "step " << step;
+    // Per-contact samples: world force = frameᵀ r, and their states add up to the counts.
+    std::array<int, 3> counts{0, 0, 0};
+    Eigen::Vector3d sum_n = Eigen::Vector3d::Zero();
+    for (int alpha = 0; alpha < out.num_contacts; ++alpha) {
+      const ContactSample sample = session.SampleContact(alpha);
+      ++counts[static_cast<std::size_t>(sample.state)];
+      sum_n += sample.force_n;
+      EXPECT_NEAR(sample.normal.norm(), 1.0, 1e-12);
+    }
+    EXPECT_EQ(counts, out.state_counts) << "step " << step;
+    EXPECT_LT((sum_n - f).norm(), 1e-12 * (1 + f.norm())) << "step " << step;
   }
 }
 
