@@ -106,6 +106,18 @@ int64_t Session::StepAndPublish(const hapco_idl_DevicePose& pose, int64_t receiv
   if (force_writer_.Write(force_) != DDS_RETCODE_OK) ++counters_.force_write_errors;
   // The contact frame goes after the force: the force is the latency-critical sample.
   FillContactFrame(pose.sequence_number);
+  frame_->server_receive_ns = receive_ns;
+  frame_->server_send_ns = force_.server_send_ns;
+  frame_->client_round_trip_ns = pose.reported_round_trip_ns;
+  frame_->device_position_m = pose.position_m;
+  frame_->contact_force_n = ToIdl(out.contact_force_n);
+  frame_->device_force_n = force_.force_n;
+  frame_->solver_status = force_.solver_status;
+  frame_->iterations = force_.iterations;
+  frame_->solver_error = out.paper_error_m;
+  frame_->separating_count = force_.separating_count;
+  frame_->sticking_count = force_.sticking_count;
+  frame_->sliding_count = force_.sliding_count;
   if (contact_writer_.Write(*frame_) != DDS_RETCODE_OK) ++counters_.contact_frames_dropped;
   return MonotonicNowNs() - receive_ns;
 }
