@@ -3,10 +3,8 @@
 // DDS -> newest force (never waiting) -> safety filter -> "motors". Counts missed ticks,
 // stale-force ticks and the round trip of each force (client time echoed by the server).
 // The device model is hapco_phantom_lib (phantom.h); DDS via hapco::service.
-#include <pthread.h>
-#include <sched.h>
-#include <time.h>
-
+#include <atomic>
+#include <csignal>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -21,6 +19,7 @@
 #include "common/realtime.h"
 #include "io/scene_file.h"
 #include "phantom.h"
+#include "phantom_client.h"
 #include "service/dds.h"
 
 namespace {
@@ -114,205 +113,93 @@ Options Parse(int argc, char** argv) {
 
 // Trajectory points 0..N (point 0 = start), m.
 std::vector<Eigen::Vector3d> LoadTrajectory(const Options& o, const hapco::sim::SceneSpec& scene) {
+  if (o.trajectory != "scene") return hapco::phantom::LoadTrajectoryCsv(o.trajectory);
   std::vector<Eigen::Vector3d> points;
-  if (o.trajectory == "scene") {
-    for (int k = 0; k <= scene.total_steps(); ++k) points.push_back(scene.DeviceTranslationAtStep(k));
-    return points;
-  }
-  std::ifstream in(o.trajectory);
-  if (!in) throw hapco::InputError("cannot read trajectory " + o.trajectory);
-  points.push_back(Eigen::Vector3d::Zero());
-  std::string line;
-  int number = 0;
-  while (std::getline(in, line)) {
-    ++number;
-    if (line.empty()) continue;
-    for (char& c : line) if (c == ',') c = ' ';
-    std::istringstream fields(line);
-    Eigen::Vector3d p;
-    if (!(fields >> p.x() >> p.y() >> p.z()) || !p.allFinite()) {
-      if (number == 1) continue;  // header
-      throw hapco::InputError(o.trajectory + ":" + std::to_string(number) + ": expected x_m,y_m,z_m");
-    }
-    points.push_back(p);
-  }
-  if (points.size() < 2) throw hapco::InputError(o.trajectory + ": no trajectory rows");
+  for (int k = 0; k <= scene.total_steps(); ++k) points.push_back(scene.DeviceTranslationAtStep(k));
   return points;
 }
 
-timespec ToTimespec(int64_t ns) {
-  return timespec{static_cast<time_t>(ns / 1'000'000'000LL), static_cast<long>(ns % 1'000'000'000LL)};
+std::atomic<bool> g_stop{false};
+extern "C" void OnStopSignal(int) { g_stop.store(true); }
+
+void WriteCsvRows(std::FILE* csv, const hapco::phantom::TickRecord& t) {
+  // One row per force taken this tick (the last one is rendered), or one row without a force.
+  const auto row = [&](long long force_sequence, const Eigen::Vector3d& raw, double round_trip_us,
+                       double render_latency_us) {
+    std::fprintf(csv, "%d,%lld,%.12g,%.12g,%.12g,%lld,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%.1f,%.1f,%d\n", t.tick,
+                 t.published ? static_cast<long long>(t.pose_sequence) : -1LL, t.position_m.x(), t.position_m.y(),
+                 t.position_m.z(), force_sequence, raw.x(), raw.y(), raw.z(), t.rendered_force_n.x(),
+                 t.rendered_force_n.y(), t.rendered_force_n.z(), round_trip_us, render_latency_us, t.stale ? 1 : 0);
+  };
+  if (t.forces.empty()) {
+    row(-1, Eigen::Vector3d::Constant(std::nan("")), -1.0, -1.0);
+    return;
+  }
+  for (const auto& f : t.forces) {
+    row(static_cast<long long>(f.pose_sequence), f.force_n, f.round_trip_us(),
+        static_cast<double>(t.tick_ns - f.client_time_ns) * 1e-3);
+  }
 }
 
-// One CSV row: a force received in a tick (or none: sequence -1) and what was rendered.
-struct Row {
-  long long force_sequence = -1;
-  Eigen::Vector3d raw_n = Eigen::Vector3d::Zero();
-  double round_trip_us = -1;
-  Eigen::Vector3d rendered_n = Eigen::Vector3d::Zero();
-};
-
-void FlushRow(std::FILE* csv, int tick, bool publishing, const Eigen::Vector3d& position, const Row& row) {
-  std::fprintf(csv, "%d,%lld,%.12g,%.12g,%.12g,%lld,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%.1f\n", tick,
-               publishing ? static_cast<long long>(tick) : -1LL, position.x(), position.y(), position.z(),
-               row.force_sequence, row.raw_n.x(), row.raw_n.y(), row.raw_n.z(), row.rendered_n.x(),
-               row.rendered_n.y(), row.rendered_n.z(), row.round_trip_us);
-}
+double Q(std::vector<double> values, double p) { return hapco::phantom::Quantile(&values, p); }
 
 int Run(const Options& o) {
   using namespace hapco;
   const sim::SceneSpec scene = io::LoadSceneFile(o.scene_path);
-  const std::vector<Eigen::Vector3d> trajectory = LoadTrajectory(o, scene);
-  const int64_t period_ns = 1'000'000;  // 1 kHz
-  const double tick_s = 1e-3;
-  const int trajectory_ticks = static_cast<int>(trajectory.size()) - 1;
-  const int ticks = o.duration_s > 0 ? static_cast<int>(std::lround(o.duration_s / tick_s)) : trajectory_ticks;
+  phantom::ClientConfig config;
+  config.client_id = o.client_id;
+  config.domain = o.domain;
+  config.mode = o.mode == "hand" ? phantom::DriveMode::kHand : phantom::DriveMode::kKinematic;
+  config.trajectory = LoadTrajectory(o, scene);
+  const int trajectory_ticks = static_cast<int>(config.trajectory.size()) - 1;
+  config.ticks = o.duration_s > 0 ? static_cast<int>(std::lround(o.duration_s / config.safety.tick_s)) : trajectory_ticks;
+  config.scene_name = scene.name;
+  config.safety.timeout_s = o.timeout_ms * 1e-3;
+  config.connect_timeout_s = o.connect_timeout_s;
+  config.drain_ticks = static_cast<int>(std::lround(o.timeout_ms));
 
   std::FILE* csv = nullptr;
   if (!o.csv_path.empty()) {
     csv = std::fopen(o.csv_path.c_str(), "w");
     if (csv == nullptr) throw InputError("cannot write " + o.csv_path);
     std::fprintf(csv, "tick,sequence,x_m,y_m,z_m,force_sequence,raw_fx_n,raw_fy_n,raw_fz_n,"
-                      "fx_n,fy_n,fz_n,round_trip_us\n");
+                      "fx_n,fy_n,fz_n,round_trip_us,render_latency_us,stale\n");
   }
-
+  std::signal(SIGINT, OnStopSignal);
+  std::signal(SIGTERM, OnStopSignal);
   hapco::UseRealtimePriority(o.rt_priority, "hapco-phantom");
-  service::Participant participant(o.domain);
-  service::Topic<hapco_idl_DevicePose> pose_topic(participant);
-  service::Topic<hapco_idl_FeedbackForce> force_topic(participant);
-  service::Topic<hapco_idl_SessionControl> session_topic(participant);
-  service::Publisher publisher(participant);
-  service::Subscriber subscriber(participant, service::ClientPartition(o.client_id));
-  service::Writer<hapco_idl_DevicePose> pose_writer(publisher, pose_topic);
-  service::Writer<hapco_idl_SessionControl> session_writer(publisher, session_topic);
-  // Reader history 8 (the writer keeps 1; history is not request/offered): when two forces
-  // arrive within one tick the newest is rendered and the older one is still logged and
-  // timed instead of being overwritten unseen.
-  service::Reader<hapco_idl_FeedbackForce> force_reader(subscriber, force_topic,
-                                                        service::ForceQos().KeepLast(8));
 
-  // Connect: the server's pose reader and session reader discovered, then SESSION_JOIN, and
-  // wait until the server's force writer for this client matches our reader, so that the
-  // first pose already gets its force back (bounded waits, no sleeps).
-  const auto connect_ns = static_cast<dds_duration_t>(o.connect_timeout_s * 1e9);
-  if (!pose_writer.WaitForReaders(1, connect_ns) || !session_writer.WaitForReaders(1, connect_ns)) {
-    std::fprintf(stderr, "hapco-phantom: no hapco-server found in domain %d within %.0f s\n", o.domain, o.connect_timeout_s);
+  phantom::PhantomClient client(config);
+  std::string why;
+  if (!client.Connect(&why)) {
+    std::fprintf(stderr, "hapco-phantom: %s\n", why.c_str());
+    if (csv != nullptr) std::fclose(csv);
     return 2;
   }
-  auto control = service::MakeSample<hapco_idl_SessionControl>();
-  service::SetClientId(control->client_id, o.client_id);
-  control->command = hapco_idl_SESSION_JOIN;
-  std::snprintf(control->scene_name, sizeof(control->scene_name), "%s", scene.name.c_str());
-  service::CheckReturn(session_writer.Write(*control), "SESSION_JOIN");
-  if (!force_reader.WaitForWriters(1, connect_ns)) {
-    std::fprintf(stderr, "hapco-phantom: the server did not open a session for '%s' within %.0f s\n",
-                 o.client_id.c_str(), o.connect_timeout_s);
-    return 2;
-  }
-
-  phantom::SafetyParameters safety_parameters;
-  safety_parameters.timeout_s = o.timeout_ms * 1e-3;
-  safety_parameters.tick_s = tick_s;
-  phantom::SafetyFilter safety(safety_parameters);
-  phantom::HandModel hand({}, trajectory[0]);
-
-  hapco_idl_DevicePose pose{};
-  service::SetClientId(pose.client_id, o.client_id);
-  pose.orientation = {1.0, 0.0, 0.0, 0.0};
-  hapco_idl_FeedbackForce force{};
-  // Round trip: pose sampled -> its force taken at a tick (so it includes the wait for the
-  // tick that renders it). server_us: server receive -> send (step + publish).
-  std::vector<double> round_trips_us, server_us;
-  round_trips_us.reserve(static_cast<std::size_t>(ticks) + 64);
-  server_us.reserve(static_cast<std::size_t>(ticks) + 64);
-  uint64_t missed_ticks = 0, forces_received = 0, write_errors = 0;
-  double peak_rendered_n = 0;
-  uint64_t last_force_sequence = 0;
-  const int64_t start_ns = hapco::MonotonicNowNs();
-  int64_t deadline_ns = start_ns + period_ns;
-  Eigen::Vector3d rendered = Eigen::Vector3d::Zero();
-  Row pending_row;
-  // After the last pose, a few more ticks (without poses) collect the last forces.
-  const int drain_ticks = static_cast<int>(std::lround(o.timeout_ms));
-  int drained = 0;
-  for (int tick = 1;; ++tick) {
-    const bool publishing = tick <= ticks;
-    if (!publishing) {
-      if (last_force_sequence >= static_cast<uint64_t>(ticks) || drained >= drain_ticks) break;
-      ++drained;
-    }
-    const timespec wake = ToTimespec(deadline_ns);
-    while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &wake, nullptr) != 0) {
-    }
-    const int64_t now = hapco::MonotonicNowNs();
-    if (now - deadline_ns > period_ns) {
-      // Overrun: count the ticks that never ran and realign to the grid (no burst of poses).
-      const int64_t late = (now - deadline_ns) / period_ns;
-      missed_ticks += static_cast<uint64_t>(late);
-      deadline_ns += late * period_ns;
-    }
-    deadline_ns += period_ns;
-    const double now_s = static_cast<double>(now - start_ns) * 1e-9;
-
-    Eigen::Vector3d position = trajectory.back();
-    if (publishing) {
-      const int k = std::min(tick, trajectory_ticks);
-      if (o.mode == "kinematic") {
-        position = trajectory[static_cast<std::size_t>(k)];
-      } else {
-        // The hand's target velocity: the trajectory's, zero once it holds its last point.
-        const int previous = tick > trajectory_ticks ? k : std::max(0, k - 1);
-        const Eigen::Vector3d velocity =
-            (trajectory[static_cast<std::size_t>(k)] - trajectory[static_cast<std::size_t>(previous)]) / tick_s;
-        position = phantom::Quantize(hand.Step(trajectory[static_cast<std::size_t>(k)], velocity, rendered, tick_s));
-      }
-      pose.sequence_number = static_cast<uint64_t>(tick);
-      pose.client_time_ns = hapco::MonotonicNowNs();
-      pose.position_m = {position.x(), position.y(), position.z()};
-      if (pose_writer.Write(pose) != DDS_RETCODE_OK) ++write_errors;
-    }
-    // Every force that arrived since the last tick, never waiting; the newest is rendered.
-    int taken = 0;
-    bool fresh = false;
-    Eigen::Vector3d raw = Eigen::Vector3d::Constant(std::nan(""));
-    while (force_reader.Take(&force)) {
-      if (forces_received > 0 && force.pose_sequence <= last_force_sequence) continue;  // reordered
-      ++forces_received;
-      fresh = true;
-      last_force_sequence = force.pose_sequence;
-      raw = Eigen::Vector3d(force.force_n.x, force.force_n.y, force.force_n.z);
-      const double round_trip_us = static_cast<double>(hapco::MonotonicNowNs() - force.client_time_ns) * 1e-3;
-      round_trips_us.push_back(round_trip_us);
-      server_us.push_back(static_cast<double>(force.server_send_ns - force.server_receive_ns) * 1e-3);
-      if (csv != nullptr && taken++ > 0) FlushRow(csv, tick, publishing, position, pending_row);
-      pending_row = {static_cast<long long>(force.pose_sequence), raw, round_trip_us, rendered};
-    }
-    rendered = safety.Update(fresh, raw, now_s);
-    peak_rendered_n = std::max(peak_rendered_n, rendered.norm());
-    if (csv != nullptr) {
-      if (!fresh) pending_row = {-1, raw, -1.0};
-      pending_row.rendered_n = rendered;
-      FlushRow(csv, tick, publishing, position, pending_row);
-    }
-  }
-  control->command = hapco_idl_SESSION_LEAVE;
-  session_writer.Write(*control);
-  session_writer.WaitForAcks(DDS_MSECS(500));
+  client.Run(
+      g_stop,
+      [csv](const phantom::TickRecord& t) {
+        if (csv != nullptr) WriteCsvRows(csv, t);
+      },
+      [&o](const std::string& line) { std::fprintf(stderr, "hapco-phantom %s: %s\n", o.client_id.c_str(), line.c_str()); });
+  client.Leave();
   if (csv != nullptr) std::fclose(csv);
 
-  std::vector<double> rt = round_trips_us;
-  std::printf("hapco-phantom %s: %d ticks, %llu forces received; round trip (to the rendering tick) "
-              "p50 %.0f us, p99 %.0f us, max %.0f us; server step+publish p50 %.0f us, p99 %.0f us, "
-              "max %.0f us; missed ticks %llu, stale ticks %llu, NaN forces %llu, clamped %llu, "
+  const phantom::ClientStats& s = client.stats();
+  std::printf("hapco-phantom %s: %d ticks, %llu poses, %llu forces received%s\n"
+              "  round trip (pose sampled -> force arrived): p50 %.0f us, p99 %.0f us, p99.9 %.0f us, max %.0f us\n"
+              "  render latency (pose sampled -> rendering tick): p50 %.0f us, p99 %.0f us; server step+publish p50 %.0f us, p99 %.0f us\n"
+              "  missed ticks %llu, stale ticks %llu, force timeouts %llu, resumed %llu, NaN forces %llu, clamped %llu, "
               "peak rendered force %.3f N, pose write errors %llu\n",
-              o.client_id.c_str(), ticks, static_cast<unsigned long long>(forces_received),
-              phantom::Quantile(&rt, 0.5), phantom::Quantile(&rt, 0.99), phantom::Quantile(&rt, 1.0),
-              phantom::Quantile(&server_us, 0.5), phantom::Quantile(&server_us, 0.99),
-              phantom::Quantile(&server_us, 1.0),
-              static_cast<unsigned long long>(missed_ticks), static_cast<unsigned long long>(safety.stale_ticks()),
-              static_cast<unsigned long long>(safety.rejected_non_finite()),
-              static_cast<unsigned long long>(safety.clamped()), peak_rendered_n,
-              static_cast<unsigned long long>(write_errors));
+              o.client_id.c_str(), s.ticks_run, static_cast<unsigned long long>(s.poses_published),
+              static_cast<unsigned long long>(s.forces_received), g_stop.load() ? " (stopped by signal)" : "",
+              Q(s.round_trip_us, 0.5), Q(s.round_trip_us, 0.99), Q(s.round_trip_us, 0.999), Q(s.round_trip_us, 1.0),
+              Q(s.render_latency_us, 0.5), Q(s.render_latency_us, 0.99), Q(s.server_time_us, 0.5),
+              Q(s.server_time_us, 0.99), static_cast<unsigned long long>(s.missed_ticks),
+              static_cast<unsigned long long>(s.stale_ticks), static_cast<unsigned long long>(s.server_losses),
+              static_cast<unsigned long long>(s.resumptions), static_cast<unsigned long long>(s.rejected_non_finite),
+              static_cast<unsigned long long>(s.clamped), s.peak_rendered_n,
+              static_cast<unsigned long long>(s.pose_write_errors));
   return 0;
 }
 

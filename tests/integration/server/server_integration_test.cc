@@ -24,111 +24,17 @@
 #include "service/config.h"
 #include "service/dds.h"
 #include "sim/step_pipeline.h"
-
-extern char** environ;
+#include "../process_support.h"
 
 namespace hapco::service {
 namespace {
 
 const std::string kScene = std::string(HAPCO_SOURCE_DIR) + "/tests/data/scenes/coarse.txtpb";
 
-// A child process running an executable, stdout and stderr to files. Killed if still
-// running at destruction.
-class Process {
- public:
-  Process(const std::vector<std::string>& args, const std::string& out_path, const std::string& err_path) {
-    std::vector<char*> argv;
-    for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
-    argv.push_back(nullptr);
-    posix_spawn_file_actions_t actions;
-    posix_spawn_file_actions_init(&actions);
-    posix_spawn_file_actions_addopen(&actions, 1, out_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    posix_spawn_file_actions_addopen(&actions, 2, err_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    const int rc = posix_spawn(&pid_, argv[0], &actions, nullptr, argv.data(), environ);
-    posix_spawn_file_actions_destroy(&actions);
-    if (rc != 0) throw std::runtime_error("posix_spawn " + args[0] + ": " + std::strerror(rc));
-    pidfd_ = static_cast<int>(syscall(SYS_pidfd_open, pid_, 0));
-    if (pidfd_ < 0) throw std::runtime_error("pidfd_open failed");
-  }
-  ~Process() {
-    if (!joined_) {
-      kill(pid_, SIGKILL);
-      waitpid(pid_, nullptr, 0);
-    }
-    close(pidfd_);
-  }
-  Process(const Process&) = delete;
-  Process& operator=(const Process&) = delete;
-
-  void Signal(int signal) { kill(pid_, signal); }
-  // Exit code (128 + signal if killed), or -1 if it is still running after timeout_ms.
-  int Wait(int timeout_ms) {
-    pollfd p{pidfd_, POLLIN, 0};
-    if (poll(&p, 1, timeout_ms) != 1) return -1;
-    int status = 0;
-    if (waitpid(pid_, &status, 0) != pid_) return -1;
-    joined_ = true;
-    return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
-  }
-
- private:
-  pid_t pid_ = -1;
-  int pidfd_ = -1;
-  bool joined_ = false;
-};
-
-std::string ReadFile(const std::string& path) {
-  std::ifstream in(path);
-  std::stringstream text;
-  text << in.rdbuf();
-  return text.str();
-}
-
-// CSV with a header: rows as column name -> text.
-std::vector<std::map<std::string, std::string>> ReadCsv(const std::string& path) {
-  std::ifstream in(path);
-  std::string line;
-  std::vector<std::string> header;
-  std::vector<std::map<std::string, std::string>> rows;
-  auto split = [](const std::string& s) {
-    std::vector<std::string> out;
-    std::stringstream ss(s);
-    std::string field;
-    while (std::getline(ss, field, ',')) out.push_back(field);
-    return out;
-  };
-  if (!std::getline(in, line)) return rows;
-  header = split(line);
-  while (std::getline(in, line)) {
-    const auto fields = split(line);
-    std::map<std::string, std::string> row;
-    for (std::size_t i = 0; i < header.size() && i < fields.size(); ++i) row[header[i]] = fields[i];
-    rows.push_back(row);
-  }
-  return rows;
-}
-
-Eigen::Vector3d Vec(const std::map<std::string, std::string>& row, const char* x, const char* y, const char* z) {
-  return {std::stod(row.at(x)), std::stod(row.at(y)), std::stod(row.at(z))};
-}
-
 // |a - b| <= 1e-9 relative per component (absolute floor 1e-12 N for zero forces).
 bool SameForce(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
   const double scale = std::max(b.cwiseAbs().maxCoeff(), 1e-3);
   return (a - b).cwiseAbs().maxCoeff() <= 1e-9 * scale;
-}
-
-std::string TestDir() {
-  const ::testing::TestInfo* info = ::testing::UnitTest::GetInstance()->current_test_info();
-  const std::string dir = std::string(HAPCO_BINARY_DIR) + "/test-output/" + info->test_suite_name() + "." + info->name();
-  std::filesystem::create_directories(dir);
-  return dir;
-}
-
-dds_domainid_t SetUpTestDomain() {
-  UseLoopbackConfig();  // children inherit CYCLONEDDS_URI
-  const ::testing::TestInfo* info = ::testing::UnitTest::GetInstance()->current_test_info();
-  return DomainIdForName(std::string(info->test_suite_name()) + "." + info->name());
 }
 
 TEST(ServerProcess, KinematicPhantomReceivesTheOfflineForces) {

@@ -1,0 +1,279 @@
+#include "phantom_client.h"
+
+#include <time.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <sstream>
+
+#include "common/error.h"
+#include "common/realtime.h"
+#include "service/dds.h"
+
+namespace hapco::phantom {
+namespace {
+
+timespec ToTimespec(int64_t ns) {
+  return timespec{static_cast<time_t>(ns / 1'000'000'000LL), static_cast<long>(ns % 1'000'000'000LL)};
+}
+
+}  // namespace
+
+struct PhantomClient::Dds {
+  explicit Dds(const ClientConfig& c)
+      : participant(c.domain),
+        pose_topic(participant),
+        force_topic(participant),
+        session_topic(participant),
+        publisher(participant),
+        subscriber(participant, service::ClientPartition(c.client_id)),
+        pose_writer(publisher, pose_topic),
+        session_writer(publisher, session_topic),
+        // Reader history 8 (the writer keeps 1; history is not request/offered): forces that
+        // arrive back to back are all taken by the listener, none overwritten unseen.
+        force_reader(subscriber, force_topic, service::ForceQos().KeepLast(8)) {}
+  // Declared first, destroyed last (children before their participant).
+  service::Participant participant;
+  service::Topic<hapco_idl_DevicePose> pose_topic;
+  service::Topic<hapco_idl_FeedbackForce> force_topic;
+  service::Topic<hapco_idl_SessionControl> session_topic;
+  service::Publisher publisher;
+  service::Subscriber subscriber;
+  service::Writer<hapco_idl_DevicePose> pose_writer;
+  service::Writer<hapco_idl_SessionControl> session_writer;
+  service::Reader<hapco_idl_FeedbackForce> force_reader;
+};
+
+PhantomClient::PhantomClient(ClientConfig config) : config_(std::move(config)) {
+  service::ValidateClientId(config_.client_id);
+  if (config_.trajectory.empty()) throw InputError("phantom client: empty trajectory");
+  if (config_.ticks <= 0) throw InputError("phantom client: the number of ticks must be positive");
+  stats_.round_trip_us.reserve(static_cast<std::size_t>(config_.ticks) + 64);
+  stats_.render_latency_us.reserve(static_cast<std::size_t>(config_.ticks) + 64);
+  stats_.server_time_us.reserve(static_cast<std::size_t>(config_.ticks) + 64);
+  dds_ = std::make_unique<Dds>(config_);
+  dds_->force_reader.SetOnDataAvailable([this] { OnForcesAvailable(); });
+}
+
+PhantomClient::~PhantomClient() {
+  // The reader (and with it the listener) goes before the arrival queue it writes to.
+  dds_.reset();
+}
+
+void PhantomClient::OnForcesAvailable() {
+  hapco_idl_FeedbackForce force{};
+  while (dds_->force_reader.Take(&force)) {
+    const int64_t now = MonotonicNowNs();
+    const uint32_t head = arrivals_head_.load(std::memory_order_relaxed);
+    if (head - arrivals_tail_.load(std::memory_order_acquire) >= kArrivalCapacity) {
+      arrivals_overflowed_.fetch_add(1, std::memory_order_relaxed);
+      continue;
+    }
+    ReceivedForce& r = arrivals_[head % kArrivalCapacity];
+    r.pose_sequence = force.pose_sequence;
+    r.client_time_ns = force.client_time_ns;
+    r.arrival_ns = now;
+    r.server_time_ns = force.server_send_ns - force.server_receive_ns;
+    r.force_n = Eigen::Vector3d(force.force_n.x, force.force_n.y, force.force_n.z);
+    r.separating = force.separating_count;
+    r.sticking = force.sticking_count;
+    r.sliding = force.sliding_count;
+    arrivals_head_.store(head + 1, std::memory_order_release);
+  }
+}
+
+bool PhantomClient::Connect(std::string* why) {
+  const auto timeout_ns = static_cast<dds_duration_t>(config_.connect_timeout_s * 1e9);
+  if (!dds_->pose_writer.WaitForReaders(1, timeout_ns) || !dds_->session_writer.WaitForReaders(1, timeout_ns)) {
+    if (why != nullptr) {
+      *why = "no hapco-server found in domain " + std::to_string(config_.domain) + " within " +
+             std::to_string(config_.connect_timeout_s) + " s (same domain id and CYCLONEDDS_URI peers?)";
+    }
+    return false;
+  }
+  auto control = service::MakeSample<hapco_idl_SessionControl>();
+  service::SetClientId(control->client_id, config_.client_id);
+  control->command = hapco_idl_SESSION_JOIN;
+  std::snprintf(control->scene_name, sizeof(control->scene_name), "%s", config_.scene_name.c_str());
+  service::CheckReturn(dds_->session_writer.Write(*control), "SESSION_JOIN");
+  if (!dds_->force_reader.WaitForWriters(1, timeout_ns)) {
+    if (why != nullptr) {
+      *why = "the server did not open a session for '" + config_.client_id + "' within " +
+             std::to_string(config_.connect_timeout_s) + " s (server full? see its log)";
+    }
+    return false;
+  }
+  return true;
+}
+
+void PhantomClient::Leave() {
+  auto control = service::MakeSample<hapco_idl_SessionControl>();
+  service::SetClientId(control->client_id, config_.client_id);
+  control->command = hapco_idl_SESSION_LEAVE;
+  dds_->session_writer.Write(*control);
+  dds_->session_writer.WaitForAcks(DDS_MSECS(500));
+}
+
+void PhantomClient::Run(const std::atomic<bool>& stop, const std::function<void(const TickRecord&)>& on_tick,
+                        const std::function<void(const std::string&)>& log) {
+  const double tick_s = config_.safety.tick_s;
+  const auto period_ns = static_cast<int64_t>(std::llround(tick_s * 1e9));
+  const auto& trajectory = config_.trajectory;
+  const int trajectory_ticks = static_cast<int>(trajectory.size()) - 1;
+  SafetyFilter safety(config_.safety);
+  HandModel hand(config_.hand, trajectory[0]);
+
+  hapco_idl_DevicePose pose{};
+  service::SetClientId(pose.client_id, config_.client_id);
+  pose.orientation = {1.0, 0.0, 0.0, 0.0};
+  pose.reported_round_trip_ns = -1;
+
+  std::vector<ReceivedForce> taken;
+  taken.reserve(kArrivalCapacity);
+  uint64_t last_force_sequence = 0;
+  bool any_force = false, was_stale = false;
+  Eigen::Vector3d rendered = Eigen::Vector3d::Zero();
+  Eigen::Vector3d previous_position = trajectory[0];
+  const int64_t start_ns = MonotonicNowNs();
+  int64_t deadline_ns = start_ns + period_ns;
+  int drained = 0;
+  for (int tick = 1; !stop.load(std::memory_order_relaxed); ++tick) {
+    const bool publishing = tick <= config_.ticks;
+    if (!publishing) {
+      if (last_force_sequence >= static_cast<uint64_t>(config_.ticks) || drained >= config_.drain_ticks) break;
+      ++drained;
+    }
+    const timespec wake = ToTimespec(deadline_ns);
+    while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &wake, nullptr) != 0) {
+    }
+    const int64_t now = MonotonicNowNs();
+    if (now - deadline_ns > period_ns) {
+      // Overrun: count the ticks that never ran and realign to the grid (no burst of poses).
+      const int64_t late = (now - deadline_ns) / period_ns;
+      stats_.missed_ticks += static_cast<uint64_t>(late);
+      deadline_ns += late * period_ns;
+    }
+    deadline_ns += period_ns;
+    const double now_s = static_cast<double>(now - start_ns) * 1e-9;
+    ++stats_.ticks_run;
+
+    // Device position this tick.
+    const int k = std::min(tick, trajectory_ticks);
+    Eigen::Vector3d position = previous_position;
+    Eigen::Vector3d velocity = Eigen::Vector3d::Zero();
+    if (publishing) {
+      const Eigen::Vector3d& target = trajectory[static_cast<std::size_t>(k)];
+      if (config_.mode == DriveMode::kKinematic) {
+        position = target;
+        velocity = (position - previous_position) / tick_s;
+      } else {
+        // The hand's target velocity: the trajectory's, zero once it holds its last point.
+        const int previous = tick > trajectory_ticks ? k : std::max(0, k - 1);
+        const Eigen::Vector3d target_velocity = (target - trajectory[static_cast<std::size_t>(previous)]) / tick_s;
+        hand.Step(target, target_velocity, rendered, tick_s);
+        position = Quantize(hand.position_m());
+        velocity = hand.velocity_m_per_s();
+      }
+      pose.sequence_number = static_cast<uint64_t>(tick);
+      pose.client_time_ns = MonotonicNowNs();
+      pose.position_m = {position.x(), position.y(), position.z()};
+      if (dds_->pose_writer.Write(pose) == DDS_RETCODE_OK) {
+        ++stats_.poses_published;
+      } else {
+        ++stats_.pose_write_errors;
+      }
+    }
+    previous_position = position;
+
+    // Every force that arrived since the last tick; the newest is rendered.
+    taken.clear();
+    bool fresh = false;
+    Eigen::Vector3d raw = Eigen::Vector3d::Constant(std::nan(""));
+    for (uint32_t tail = arrivals_tail_.load(std::memory_order_relaxed);
+         tail != arrivals_head_.load(std::memory_order_acquire); ++tail) {
+      const ReceivedForce r = arrivals_[tail % kArrivalCapacity];
+      arrivals_tail_.store(tail + 1, std::memory_order_release);
+      if (any_force && r.pose_sequence <= last_force_sequence) {
+        ++stats_.forces_reordered;
+        continue;
+      }
+      any_force = true;
+      ++stats_.forces_received;
+      fresh = true;
+      last_force_sequence = r.pose_sequence;
+      raw = r.force_n;
+      stats_.round_trip_us.push_back(r.round_trip_us());
+      stats_.render_latency_us.push_back(static_cast<double>(now - r.client_time_ns) * 1e-3);
+      stats_.server_time_us.push_back(static_cast<double>(r.server_time_ns) * 1e-3);
+      pose.reported_round_trip_ns = r.arrival_ns - r.client_time_ns;
+      taken.push_back(r);
+    }
+    rendered = safety.Update(fresh, raw, now_s);
+    stats_.peak_rendered_n = std::max(stats_.peak_rendered_n, rendered.norm());
+    const bool stale = safety.stale();
+    if (stale && !was_stale) {
+      ++stats_.server_losses;
+      if (log) {
+        char line[160];
+        std::snprintf(line, sizeof(line), "t=%.3f s: no force for %.0f ms: ramping the force to zero in %.0f ms",
+                      now_s, config_.safety.timeout_s * 1e3, config_.safety.ramp_s * 1e3);
+        log(line);
+      }
+    } else if (!stale && was_stale) {
+      ++stats_.resumptions;
+      if (log) {
+        char line[120];
+        std::snprintf(line, sizeof(line), "t=%.3f s: forces resumed (pose %llu)", now_s,
+                      static_cast<unsigned long long>(last_force_sequence));
+        log(line);
+      }
+    }
+    was_stale = stale;
+    if (on_tick) {
+      TickRecord record;
+      record.tick = tick;
+      record.published = publishing;
+      record.pose_sequence = publishing ? static_cast<uint64_t>(tick) : 0;
+      record.time_s = now_s;
+      record.tick_ns = now;
+      record.position_m = position;
+      record.velocity_m_per_s = velocity;
+      record.forces = taken;
+      record.rendered_force_n = rendered;
+      record.stale = stale;
+      on_tick(record);
+    }
+  }
+  stats_.stale_ticks = safety.stale_ticks();
+  stats_.rejected_non_finite = safety.rejected_non_finite();
+  stats_.clamped = safety.clamped();
+  stats_.arrivals_overflowed = arrivals_overflowed_.load();
+}
+
+std::vector<Eigen::Vector3d> LoadTrajectoryCsv(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw InputError("cannot read trajectory " + path);
+  std::vector<Eigen::Vector3d> points{Eigen::Vector3d::Zero()};
+  std::string line;
+  int number = 0;
+  while (std::getline(in, line)) {
+    ++number;
+    if (line.empty()) continue;
+    for (char& c : line) {
+      if (c == ',') c = ' ';
+    }
+    std::istringstream fields(line);
+    Eigen::Vector3d p;
+    if (!(fields >> p.x() >> p.y() >> p.z()) || !p.allFinite()) {
+      if (number == 1) continue;  // header
+      throw InputError(path + ":" + std::to_string(number) + ": expected x_m,y_m,z_m");
+    }
+    points.push_back(p);
+  }
+  if (points.size() < 2) throw InputError(path + ": no trajectory rows");
+  return points;
+}
+
+}  // namespace hapco::phantom

@@ -1,0 +1,135 @@
+#pragma once
+// One emulated haptic device connected to a hapco-server: its own DDS participant, the
+// absolute-time 1 kHz servo loop (clock_nanosleep), the device model of phantom.h and the
+// force safety filter. Used by hapco-phantom (one device) and hapco-loadtest (N devices,
+// one thread each).
+//
+// Pipelined (issue 5): each tick publishes the pose and renders the newest force that has
+// arrived; it never waits for the server. Forces are taken on Cyclone's receive thread (a
+// listener, ~30 us faster than a waitset: platform-notes.md) and stamped on arrival, so the
+// round trip measured is the network's plus the server's (pose sampled -> force arrived),
+// not rounded up to the next tick; the render latency (pose sampled -> the tick that
+// renders its force) is reported separately.
+#include <Eigen/Dense>
+
+#include <array>
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "phantom.h"
+
+namespace hapco::phantom {
+
+enum class DriveMode {
+  kKinematic,  // the device follows the trajectory exactly (no quantisation): forces compare with hapco-sim
+  kHand,       // a hand drags the device along the trajectory (HandModel), positions quantised
+};
+
+struct ClientConfig {
+  std::string client_id;
+  int domain = 0;                                 // DDS domain; configuration from CYCLONEDDS_URI
+  DriveMode mode = DriveMode::kKinematic;
+  std::vector<Eigen::Vector3d> trajectory;        // points 0..N, m; tick k targets point min(k, N)
+  int ticks = 0;                                  // poses to publish (> 0)
+  std::string scene_name;                         // sent with SESSION_JOIN
+  SafetyParameters safety;                        // timeout, ramp, limits; tick_s is the servo period
+  HandParameters hand;
+  double connect_timeout_s = 30.0;
+  // After the last pose, at most this many ticks collect the forces still in flight.
+  int drain_ticks = 50;
+};
+
+// A force sample as it arrived (stamped on Cyclone's receive thread).
+struct ReceivedForce {
+  uint64_t pose_sequence = 0;
+  int64_t client_time_ns = 0;    // the pose's sampling time, echoed by the server
+  int64_t arrival_ns = 0;        // CLOCK_MONOTONIC on arrival at this client
+  int64_t server_time_ns = 0;    // server: pose received -> force sent
+  Eigen::Vector3d force_n = Eigen::Vector3d::Zero();  // as received (may be non-finite)
+  uint32_t separating = 0, sticking = 0, sliding = 0;
+  double round_trip_us() const { return static_cast<double>(arrival_ns - client_time_ns) * 1e-3; }
+};
+
+// What one servo tick did, for CSV logs and force-stability analysis (called in the tick
+// thread: keep the handler cheap).
+struct TickRecord {
+  int tick = 0;                    // 1-based
+  bool published = false;          // a pose was sent this tick (false while draining)
+  uint64_t pose_sequence = 0;      // = tick when published
+  double time_s = 0;               // since the loop started, s
+  int64_t tick_ns = 0;             // CLOCK_MONOTONIC when the tick woke, ns
+  Eigen::Vector3d position_m = Eigen::Vector3d::Zero();        // device position (as published)
+  Eigen::Vector3d velocity_m_per_s = Eigen::Vector3d::Zero();  // device velocity
+  std::span<const ReceivedForce> forces;  // taken this tick, oldest first; the last is rendered
+  Eigen::Vector3d rendered_force_n = Eigen::Vector3d::Zero();  // after the safety filter
+  bool stale = false;              // the safety filter is in (or after) a timeout ramp
+};
+
+struct ClientStats {
+  int ticks_run = 0;
+  uint64_t poses_published = 0, pose_write_errors = 0;
+  uint64_t forces_received = 0;     // in order, new sequence
+  uint64_t forces_reordered = 0;    // older than one already taken: logged, not rendered
+  uint64_t arrivals_overflowed = 0; // arrival queue full (tick thread stalled): dropped
+  uint64_t missed_ticks = 0;        // servo deadlines that passed without a tick
+  uint64_t stale_ticks = 0, rejected_non_finite = 0, clamped = 0;
+  uint64_t server_losses = 0;       // times the force timeout engaged (ramp to zero)
+  uint64_t resumptions = 0;         // times forces came back after a timeout
+  double peak_rendered_n = 0;
+  std::vector<double> round_trip_us;       // pose sampled -> force arrived
+  std::vector<double> render_latency_us;   // pose sampled -> the tick that renders it
+  std::vector<double> server_time_us;      // server receive -> send
+};
+
+class PhantomClient {
+ public:
+  // Creates the participant, topics, writers and the force reader (partition of this
+  // client). Throws InputError for a bad id, DdsError if DDS cannot be set up.
+  explicit PhantomClient(ClientConfig config);
+  ~PhantomClient();
+  PhantomClient(const PhantomClient&) = delete;
+  PhantomClient& operator=(const PhantomClient&) = delete;
+
+  // Waits for the server's readers, sends SESSION_JOIN and waits until the server's force
+  // writer for this client matches, so the first pose already gets its force. False (with
+  // the reason in *why) if no server answers within connect_timeout_s.
+  bool Connect(std::string* why);
+
+  // Runs the servo loop: config.ticks poses, then up to drain_ticks ticks for forces in
+  // flight; returns early when `stop` becomes true. `on_tick` (optional) sees every tick.
+  // `log` (optional) gets one line per safety event (timeout engaged, forces resumed).
+  void Run(const std::atomic<bool>& stop, const std::function<void(const TickRecord&)>& on_tick = {},
+           const std::function<void(const std::string&)>& log = {});
+
+  // SESSION_LEAVE (reliable; waits up to 0.5 s for the acknowledgement).
+  void Leave();
+
+  const ClientStats& stats() const { return stats_; }
+  const ClientConfig& config() const { return config_; }
+
+ private:
+  struct Dds;  // the DDS entities (service/dds.h stays out of this header)
+  void OnForcesAvailable();  // Cyclone's receive thread
+
+  // Single-producer (receive thread) single-consumer (tick thread) queue of arrivals.
+  static constexpr uint32_t kArrivalCapacity = 256;
+  std::array<ReceivedForce, kArrivalCapacity> arrivals_;
+  std::atomic<uint32_t> arrivals_head_{0};  // next slot to write (producer)
+  std::atomic<uint32_t> arrivals_tail_{0};  // next slot to read (consumer)
+  std::atomic<uint64_t> arrivals_overflowed_{0};
+
+  ClientConfig config_;
+  ClientStats stats_;
+  std::unique_ptr<Dds> dds_;
+};
+
+// A trajectory CSV: rows x_m,y_m,z_m (a header line is skipped), one per tick; point 0 is the
+// origin. Throws InputError with FILE:LINE for a malformed row.
+std::vector<Eigen::Vector3d> LoadTrajectoryCsv(const std::string& path);
+
+}  // namespace hapco::phantom
