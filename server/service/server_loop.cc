@@ -1,5 +1,7 @@
 #include "service/server_loop.h"
 
+#include <sys/resource.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -293,6 +295,22 @@ void ServerLoop::PublishStatus(int64_t now_ns) {
   status->step_time_p99_us = Percentile(&step_times_us_, 0.99);
   status->step_time_max_us = step_times_us_.empty() ? 0.0 : *std::max_element(step_times_us_.begin(), step_times_us_.end());
   status->counters = counters_.input;
+  // CPU use over the period since the last status (getrusage: this process, all threads,
+  // so DDS receive threads count too).
+  rusage usage{};
+  getrusage(RUSAGE_SELF, &usage);
+  const int64_t cpu_ns = (static_cast<int64_t>(usage.ru_utime.tv_sec) + usage.ru_stime.tv_sec) * 1'000'000'000LL +
+                         (static_cast<int64_t>(usage.ru_utime.tv_usec) + usage.ru_stime.tv_usec) * 1'000LL;
+  if (last_status_ns_ > 0 && now_ns > last_status_ns_) {
+    status->cpu_use = static_cast<double>(cpu_ns - last_status_cpu_ns_) / static_cast<double>(now_ns - last_status_ns_);
+  }
+  last_status_ns_ = now_ns;
+  last_status_cpu_ns_ = cpu_ns;
+  const ServerCounters all = counters();
+  status->steps = all.steps;
+  status->superseded = all.superseded;
+  status->contact_frames_dropped = all.contact_frames_dropped;
+  status->non_finite_forces = all.non_finite_forces;
   step_times_us_.clear();
   if (status_writer_.Write(*status) == DDS_RETCODE_OK) ++counters_.status_published;
 }

@@ -105,6 +105,7 @@ class ServerLoop {
   SessionCounters closed_session_counters_;
   std::vector<double> step_times_us_;  // this status period
   int64_t start_ns_ = 0;
+  int64_t last_status_ns_ = 0, last_status_cpu_ns_ = 0;  // for ServerStatus.cpu_use
   std::vector<int64_t> last_log_ns_;
   std::vector<uint64_t> suppressed_logs_;
 };
