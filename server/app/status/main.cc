@@ -1,0 +1,115 @@
+// hapco-status: waits for a ServerStatus on "hapco/status" (transient-local, so a running
+// server's last status arrives at once), prints it and exits 0; exits 1 if none arrives in
+// time. The container HEALTHCHECK runs it (docker/Dockerfile, docs/container.md).
+// --max-age-s also rejects a stale status (a server whose loop hangs keeps its DDS
+// participant, and with it the last status, alive): the check then waits for a newer one.
+#include <dds/dds.h>
+
+#include <cinttypes>
+#include <cstdio>
+#include <cstdlib>
+#include <string>
+
+#include "common/cli.h"
+#include "common/error.h"
+#include "service/dds.h"
+
+namespace {
+
+constexpr const char* kUsage = R"(usage: hapco-status [options]
+
+Waits for a hapco-server's ServerStatus (topic "hapco/status"), prints it, exits 0.
+
+  --domain N          DDS domain id (default 0); configuration from CYCLONEDDS_URI
+  --timeout-s S       give up after S seconds: exit 1 (default 5)
+  --max-age-s S       accept only a status published less than S seconds ago (default: any);
+                      the server publishes one every --status-period (default 1 s)
+  --server-id ID      accept only the server with this id (default: any)
+  --quiet             print nothing on success
+  --help              this text
+
+Exit code: 0 status received, 1 none in time (or bad flags), 3 DDS failure.
+)";
+
+struct Options {
+  int domain = 0;
+  double timeout_s = 5, max_age_s = 0;
+  std::string server_id;
+  bool quiet = false;
+};
+
+Options Parse(int argc, char** argv) {
+  Options o;
+  for (int i = 1; i < argc; ++i) {
+    const std::string arg = argv[i];
+    auto value = [&]() -> const char* {
+      if (i + 1 >= argc) throw hapco::InputError(arg + " needs a value (see --help)");
+      return argv[++i];
+    };
+    if (arg == "--help" || arg == "-h") {
+      std::fputs(kUsage, stdout);
+      std::exit(0);
+    } else if (arg == "--domain") {
+      o.domain = static_cast<int>(hapco::cli::ParseInteger("--domain", value(), 0, 230));
+    } else if (arg == "--timeout-s") {
+      o.timeout_s = hapco::cli::ParsePositive("--timeout-s", value());
+    } else if (arg == "--max-age-s") {
+      o.max_age_s = hapco::cli::ParsePositive("--max-age-s", value());
+    } else if (arg == "--server-id") {
+      o.server_id = value();
+    } else if (arg == "--quiet") {
+      o.quiet = true;
+    } else {
+      throw hapco::InputError("unknown argument " + arg + " (see --help)");
+    }
+  }
+  return o;
+}
+
+dds_duration_t Seconds(double s) { return static_cast<dds_duration_t>(s * 1e9); }
+
+int Run(const Options& o) {
+  namespace svc = hapco::service;
+  svc::Participant participant(o.domain);
+  svc::Topic<hapco_idl_ServerStatus> topic(participant);
+  svc::Subscriber subscriber(participant);
+  svc::Reader<hapco_idl_ServerStatus> reader(subscriber, topic);
+  auto status = svc::MakeSample<hapco_idl_ServerStatus>();
+
+  const dds_time_t deadline = dds_time() + Seconds(o.timeout_s);
+  for (dds_time_t now = dds_time(); now < deadline; now = dds_time()) {
+    reader.WaitForData(deadline - now);
+    dds_sample_info_t info;
+    while (reader.Take(status.get(), &info)) {
+      if (!o.server_id.empty() && o.server_id != status->server_id) continue;
+      // source_timestamp is the server's wall clock: the age check assumes synchronised
+      // clocks (same host in a HEALTHCHECK).
+      const double age_s = static_cast<double>(dds_time() - info.source_timestamp) * 1e-9;
+      if (o.max_age_s > 0 && age_s > o.max_age_s) continue;
+      if (!o.quiet) {
+        const auto& c = status->counters;
+        std::printf(
+            "hapco-status: server %s, domain %d, up %.1f s, %" PRIu32 " sessions, step p50 %.0f us "
+            "p99 %.0f us max %.0f us, status age %.3f s; bad input: nan %" PRIu64 ", workspace %" PRIu64
+            ", jumps %" PRIu64 ", out-of-order %" PRIu64 ", duplicates %" PRIu64
+            ", unknown clients %" PRIu64 ", floods %" PRIu64 "\n",
+            status->server_id, o.domain, static_cast<double>(status->uptime_ns) * 1e-9,
+            static_cast<uint32_t>(status->sessions), status->step_time_p50_us,
+            status->step_time_p99_us, status->step_time_max_us, age_s, c.bad_pose_nan,
+            c.out_of_workspace, c.position_jumps, c.out_of_order, c.duplicates,
+            c.unknown_clients, c.floods);
+      }
+      return 0;
+    }
+  }
+  std::fprintf(stderr, "hapco-status: no%s server status in domain %d within %.1f s (check "
+               "the server, --domain and CYCLONEDDS_URI peers)\n",
+               o.max_age_s > 0 ? " fresh" : "", o.domain, o.timeout_s);
+  return 1;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  return hapco::cli::RunMain("hapco-status", [&] { return Run(Parse(argc, argv)); });
+}
