@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -21,7 +22,9 @@ ends (a torn tail from a writer that was killed is skipped and reported), and op
 writes one CSV row per step and PNG charts: force over time, contacts by state over time,
 round-trip histogram (online recordings).
 
-  --csv FILE     steps as CSV (columns with units in the header)
+  --csv FILE     steps as CSV, one row per step of every client (client_id column; units in
+                 the header; contacts_missing = 1: the step's frame was lost, written from
+                 its force alone)
   --plots DIR    write force.png, contact_states.png, round_trip.png to DIR (needs
                  /usr/bin/python3 with matplotlib; implies a CSV at DIR/steps.csv)
   --help         this text
@@ -55,19 +58,45 @@ int Run(int argc, char** argv) {
   const auto records = hapco::io::ReadRecording(path, &report);
   std::printf("recording  %s: %s\n", path.c_str(), report.Summary().c_str());
   std::vector<const hapco::recording::Step*> steps;
+  std::vector<const hapco::recording::ServerStatus*> statuses;
+  bool have_header = false;
   for (const auto& record : records) {
     if (record.has_header()) {
       const auto& header = record.header();
+      have_header = true;
       std::printf("header     written by %s (HapCo %s), scene %s, solver %s\n", header.writer().c_str(),
-                  header.hapco_version().c_str(), header.scene_name().c_str(), header.solver().c_str());
+                  header.hapco_version().c_str(), header.scene_name().empty() ? "(none)" : header.scene_name().c_str(),
+                  header.solver().empty() ? "(none)" : header.solver().c_str());
     } else if (record.has_step()) {
       steps.push_back(&record.step());
+    } else if (record.has_status()) {
+      statuses.push_back(&record.status());
     }
   }
+  if (!have_header) std::printf("header     missing\n");
   double peak_force_n = 0, peak_device_n = 0;
   long not_converged = 0, contacts[3] = {0, 0, 0};
-  std::vector<double> step_times, round_trips;
+  std::vector<double> step_times, server_times, round_trips;
+  // Per client, in order of appearance: steps, first/last step number, steps without contacts.
+  struct ClientSummary {
+    long steps = 0, without_contacts = 0;
+    unsigned long long first = 0, last = 0, gaps = 0;
+  };
+  std::vector<std::string> client_order;
+  std::map<std::string, ClientSummary> clients;
   for (const auto* step : steps) {
+    auto [it, inserted] = clients.try_emplace(step->client_id());
+    ClientSummary& c = it->second;
+    if (inserted) {
+      client_order.push_back(step->client_id());
+      c.first = step->step();
+    } else if (step->step() > c.last + 1) {
+      c.gaps += step->step() - c.last - 1;  // steps the server made that are not in the file
+    }
+    c.last = step->step();
+    ++c.steps;
+    if (step->contacts_missing()) ++c.without_contacts;
+    if (step->server_time_s() > 0) server_times.push_back(step->server_time_s());
     const auto& f = step->contact_force_n();
     const auto& d = step->device_force_n();
     peak_force_n = std::max(peak_force_n, std::sqrt(f.x() * f.x() + f.y() * f.y() + f.z() * f.z()));
@@ -88,9 +117,39 @@ int Run(int argc, char** argv) {
     std::sort(values.begin(), values.end());
     return values[static_cast<std::size_t>(q * static_cast<double>(values.size() - 1))];
   };
-  if (!step_times.empty()) {
+  for (const auto& id : client_order) {
+    const ClientSummary& c = clients[id];
+    std::printf("client     %s: %ld steps (%llu..%llu), %llu not in the file, %ld without contacts (frame lost)\n",
+                id.c_str(), c.steps, c.first, c.last, c.gaps, c.without_contacts);
+  }
+  // Offline recordings time every step; online ones carry the server's pose-in -> force-out.
+  if (!step_times.empty() && percentile(step_times, 1.0) > 0) {
     std::printf("step time  p50 %.1f us, p99 %.1f us, max %.1f us\n", 1e6 * percentile(step_times, 0.5),
                 1e6 * percentile(step_times, 0.99), 1e6 * percentile(step_times, 1.0));
+  }
+  if (!server_times.empty()) {
+    std::printf("server     pose received -> force sent p50 %.1f us, p99 %.1f us, max %.1f us\n",
+                1e6 * percentile(server_times, 0.5), 1e6 * percentile(server_times, 0.99),
+                1e6 * percentile(server_times, 1.0));
+  }
+  if (!statuses.empty()) {
+    const auto& s = *statuses.back();
+    std::printf("status     %zu records from %s; last: uptime %.1f s, %u sessions, step p50 %.1f us, p99 %.1f us, "
+                "max %.1f us\n",
+                statuses.size(), s.server_id().c_str(), s.uptime_s(), s.sessions(), 1e6 * s.step_time_p50_s(),
+                1e6 * s.step_time_p99_s(), 1e6 * s.step_time_max_s());
+    double worst_p99_s = 0, worst_max_s = 0;
+    for (const auto* status : statuses) {
+      worst_p99_s = std::max(worst_p99_s, status->step_time_p99_s());
+      worst_max_s = std::max(worst_max_s, status->step_time_max_s());
+    }
+    std::printf("status     worst status period: step p99 %.1f us, max %.1f us\n", 1e6 * worst_p99_s, 1e6 * worst_max_s);
+    std::printf("bad input  nan %llu, workspace %llu, jumps %llu, out-of-order %llu, duplicates %llu, "
+                "unknown clients %llu, floods %llu (server counters, last status)\n",
+                static_cast<unsigned long long>(s.bad_pose_nan()), static_cast<unsigned long long>(s.out_of_workspace()),
+                static_cast<unsigned long long>(s.position_jumps()), static_cast<unsigned long long>(s.out_of_order()),
+                static_cast<unsigned long long>(s.duplicates()), static_cast<unsigned long long>(s.unknown_clients()),
+                static_cast<unsigned long long>(s.floods()));
   }
   if (!round_trips.empty()) {
     std::printf("round trip p50 %.1f us, p99 %.1f us, max %.1f us\n", 1e6 * percentile(round_trips, 0.5),
@@ -106,15 +165,18 @@ int Run(int argc, char** argv) {
     std::FILE* csv = std::fopen(csv_path.c_str(), "w");
     if (csv == nullptr) throw hapco::InputError("cannot write " + csv_path);
     std::fprintf(csv, "step,client_id,time_ns,dx_m,dy_m,dz_m,fx_n,fy_n,fz_n,device_fx_n,device_fy_n,device_fz_n,"
-                      "separating,sticking,sliding,iterations,solver_status,solve_s,step_s,round_trip_s\n");
+                      "separating,sticking,sliding,iterations,solver_status,solve_s,step_s,round_trip_s,"
+                      "pose_sequence,server_time_s,contacts_missing,contacts\n");
     for (const auto* s : steps) {
-      std::fprintf(csv, "%llu,%s,%lld,%.9g,%.9g,%.9g,%.12g,%.12g,%.12g,%.12g,%.12g,%.12g,%u,%u,%u,%u,%s,%.6g,%.6g,%.6g\n",
+      std::fprintf(csv, "%llu,%s,%lld,%.9g,%.9g,%.9g,%.12g,%.12g,%.12g,%.12g,%.12g,%.12g,%u,%u,%u,%u,%s,%.6g,%.6g,%.6g,"
+                   "%llu,%.6g,%d,%d\n",
                    static_cast<unsigned long long>(s->step()), s->client_id().c_str(),
                    static_cast<long long>(s->time_ns()), s->device_translation_m().x(), s->device_translation_m().y(),
                    s->device_translation_m().z(), s->contact_force_n().x(), s->contact_force_n().y(),
                    s->contact_force_n().z(), s->device_force_n().x(), s->device_force_n().y(), s->device_force_n().z(),
                    s->separating(), s->sticking(), s->sliding(), s->iterations(), s->solver_status().c_str(),
-                   s->solve_s(), s->step_s(), s->round_trip_s());
+                   s->solve_s(), s->step_s(), s->round_trip_s(), static_cast<unsigned long long>(s->pose_sequence()),
+                   s->server_time_s(), s->contacts_missing() ? 1 : 0, s->contacts_size());
     }
     std::fclose(csv);
     std::printf("csv        %s\n", csv_path.c_str());

@@ -1,0 +1,446 @@
+// hapco-recorder: records a live HapCo session. Subscribes (partition hapco/client/*) to every
+// client's ContactStateFrame (reliable) and FeedbackForce (best effort), and to ServerStatus,
+// and appends one recording::Step per server step and one recording::ServerStatus per status
+// to a recording file (io/recording.h: checksummed records, flushed one by one, so a SIGKILL
+// leaves every complete record readable). docs/recorder.md has the QoS reasoning.
+//
+// Threads: DDS delivers into the reader histories on its own threads; all taking, matching
+// and file I/O happens on the main thread in a waitset loop (never in a listener). A signal
+// handler only writes to a self-pipe; a small thread turns that into a waitset wake-up.
+#include <signal.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cerrno>
+#include <cstdint>
+#include <cstdio>
+#include <cstring>
+#include <deque>
+#include <fstream>
+#include <iterator>
+#include <map>
+#include <memory>
+#include <string>
+#include <thread>
+
+#include "common/cli.h"
+#include "common/error.h"
+#include "common/realtime.h"
+#include "contact/solver.h"
+#include "io/recording.h"
+#include "io/scene_file.h"
+#include "service/dds.h"
+
+namespace {
+
+using hapco::service::kAllClientsPartition;
+
+constexpr const char* kUsage = R"(usage: hapco-recorder --output FILE [options]
+
+Records a live HapCo session: every client's contact-state frames and forces (partition
+hapco/client/*) and the server status, into a recording file (one record per server step,
+checksummed and flushed record by record). Read it with hapco-report. docs/recorder.md.
+
+  --output FILE     recording to write (created or truncated)
+  --domain N        DDS domain id (default 0); configuration from CYCLONEDDS_URI
+  --scene FILE      scene file the server runs: its name and text go into the header
+                    (default: no scene in the header)
+  --duration S      stop after S seconds (default: run until SIGINT/SIGTERM)
+  --quiet           no progress line (the exit summary is still printed)
+  --help            this text
+
+Steps come from the contact-state frames; a force whose frame never arrived becomes a step
+with contacts_missing set. Gaps in a client's server step counter are counted as missing
+steps. SIGINT/SIGTERM: what has been received is written, then a one-line summary.
+Exit code: 0 ok, 1 bad input (flags, unwritable file, scene file), 3 DDS failure.
+)";
+
+// Reader history of the frame reader, per client (instance). Depth, not KEEP_ALL: a
+// KEEP_LAST reader accepts and acknowledges every frame, so it never holds back the server's
+// writer; 1000 frames = 1 s at 1 kHz of slack for the main thread (docs/recorder.md).
+constexpr int32_t kFrameDepth = 1000;
+// Forces are best effort; a deep reader history only keeps them from being overwritten
+// before the main thread takes them.
+constexpr int32_t kForceDepth = 256;
+constexpr int32_t kStatusDepth = 16;
+// Forces waiting for their frame, per client: beyond this (frames stopped arriving) the
+// oldest is written on its own.
+constexpr std::size_t kMaxPendingForces = 4096;
+
+struct Options {
+  std::string output, scene_path;
+  int domain = 0;
+  double duration_s = 0;  // 0 = until a signal
+  bool quiet = false;
+};
+
+Options Parse(int argc, char** argv) {
+  Options o;
+  for (int i = 1; i < argc; ++i) {
+    const std::string arg = argv[i];
+    auto value = [&]() -> const char* {
+      if (i + 1 >= argc) throw hapco::InputError(arg + " needs a value (see --help)");
+      return argv[++i];
+    };
+    if (arg == "--help" || arg == "-h") {
+      std::fputs(kUsage, stdout);
+      std::exit(0);
+    } else if (arg == "--output") {
+      o.output = value();
+    } else if (arg == "--domain") {
+      o.domain = static_cast<int>(hapco::cli::ParseInteger("--domain", value(), 0, 230));
+    } else if (arg == "--scene") {
+      o.scene_path = value();
+    } else if (arg == "--duration") {
+      o.duration_s = hapco::cli::ParsePositive("--duration", value());
+    } else if (arg == "--quiet") {
+      o.quiet = true;
+    } else {
+      throw hapco::InputError("unknown option or argument " + arg + " (see --help)");
+    }
+  }
+  if (o.output.empty()) throw hapco::InputError("--output FILE is required (see --help)");
+  return o;
+}
+
+// Same spelling as hapco-sim recordings (contact::StatusName). A step without contacts ran
+// no solve; hapco-sim records it as "converged", and so do we.
+std::string StatusName(hapco_idl_SolverStatus status) {
+  using hapco::contact::SolverStatus;
+  switch (status) {
+    case hapco_idl_SOLVER_CONVERGED:
+    case hapco_idl_SOLVER_NO_CONTACT: return std::string(hapco::contact::StatusName(SolverStatus::kConverged));
+    case hapco_idl_SOLVER_MAX_ITERATIONS: return std::string(hapco::contact::StatusName(SolverStatus::kMaxIterations));
+    case hapco_idl_SOLVER_TIME_BUDGET_EXCEEDED:
+      return std::string(hapco::contact::StatusName(SolverStatus::kTimeBudgetExceeded));
+    case hapco_idl_SOLVER_DIVERGED: return std::string(hapco::contact::StatusName(SolverStatus::kDiverged));
+  }
+  return "unknown";
+}
+
+void Set(hapco::recording::Vec3* out, const hapco_idl_Vec3& v) {
+  out->set_x(v.x);
+  out->set_y(v.y);
+  out->set_z(v.z);
+}
+
+// Matching of forces to frames, per client. The server writes, per step, the force then the
+// frame, both in step order; frames are reliable (they arrive in order, or not at all when
+// the server's keep-last history dropped them), forces best effort. A force waits in
+// `pending` until a frame with the same or a later pose sequence arrives: same = matched
+// (the frame is the record), later = its frame is lost for good, so the force is written as
+// a step of its own (contacts_missing). A client restart (pose sequence not increasing) or a
+// new session (step counter restarting) starts a new epoch in either stream.
+struct PendingForce {
+  uint64_t epoch;
+  hapco_idl_FeedbackForce force;
+};
+
+struct ClientState {
+  bool have_frame = false;
+  uint64_t last_step = 0, last_frame_sequence = 0, frame_epoch = 0;
+  bool have_force = false;
+  uint64_t last_force_sequence = 0, force_epoch = 0;
+  std::deque<PendingForce> pending;
+  uint64_t steps = 0;           // Step records written for this client
+  uint64_t missing_steps = 0;   // gaps in the server step counter (frames never received)
+  uint64_t from_forces = 0;     // Step records written from a force alone
+  uint64_t late_forces = 0;     // forces that arrived after their frame (already recorded)
+};
+
+class Recorder {
+ public:
+  Recorder(hapco::io::RecordingWriter* writer) : writer_(writer) {}
+
+  void OnForce(const hapco_idl_FeedbackForce& force) {
+    ++forces_seen_;
+    ClientState& c = clients_[force.client_id];
+    if (c.have_force && force.pose_sequence <= c.last_force_sequence) ++c.force_epoch;
+    c.have_force = true;
+    c.last_force_sequence = force.pose_sequence;
+    if (c.have_frame && c.force_epoch == c.frame_epoch && force.pose_sequence <= c.last_frame_sequence) {
+      ++c.late_forces;  // its frame was written already (or its gap is passed)
+      return;
+    }
+    c.pending.push_back({c.force_epoch, force});
+    if (c.pending.size() > kMaxPendingForces) {
+      WriteForceStep(force.client_id, &c, c.pending.front().force, c.last_step + 1);
+      c.last_step += 1;
+      c.pending.pop_front();
+    }
+  }
+
+  void OnFrame(const hapco_idl_ContactStateFrame& frame) {
+    ClientState& c = clients_[frame.client_id];
+    const bool new_session = c.have_frame && frame.step <= c.last_step;
+    if (c.have_frame && (new_session || frame.pose_sequence <= c.last_frame_sequence)) ++c.frame_epoch;
+    const uint64_t previous_step = (c.have_frame && !new_session) ? c.last_step : 0;
+    if (c.have_frame && !new_session && frame.step > c.last_step + 1) {
+      c.missing_steps += frame.step - c.last_step - 1;
+      missing_steps_ += frame.step - c.last_step - 1;
+    }
+    // Forces older than this frame: their frames are lost. Their step numbers are the next
+    // ones after the previous frame: exact when every force of the gap arrived, else the
+    // lowest possible (docs/recorder.md).
+    uint64_t next_step = previous_step + 1;
+    while (!c.pending.empty()) {
+      const PendingForce& p = c.pending.front();
+      const bool older = p.epoch < c.frame_epoch ||
+                         (p.epoch == c.frame_epoch && p.force.pose_sequence < frame.pose_sequence);
+      const bool same = p.epoch == c.frame_epoch && p.force.pose_sequence == frame.pose_sequence;
+      if (older) {
+        WriteForceStep(frame.client_id, &c, p.force, std::min(next_step++, frame.step - 1));
+      } else if (!same) {
+        break;
+      }
+      c.pending.pop_front();
+      if (same) break;
+    }
+    c.have_frame = true;
+    c.last_step = frame.step;
+    c.last_frame_sequence = frame.pose_sequence;
+    WriteFrameStep(frame, &c);
+  }
+
+  void OnStatus(const hapco_idl_ServerStatus& s) {
+    auto* status = record_.mutable_status();
+    status->Clear();
+    status->set_server_id(s.server_id);
+    status->set_time_ns(hapco::MonotonicNowNs());
+    status->set_uptime_s(static_cast<double>(s.uptime_ns) * 1e-9);
+    status->set_sessions(s.sessions);
+    status->set_step_time_p50_s(s.step_time_p50_us * 1e-6);
+    status->set_step_time_p99_s(s.step_time_p99_us * 1e-6);
+    status->set_step_time_max_s(s.step_time_max_us * 1e-6);
+    status->set_bad_pose_nan(s.counters.bad_pose_nan);
+    status->set_out_of_workspace(s.counters.out_of_workspace);
+    status->set_position_jumps(s.counters.position_jumps);
+    status->set_out_of_order(s.counters.out_of_order);
+    status->set_duplicates(s.counters.duplicates);
+    status->set_unknown_clients(s.counters.unknown_clients);
+    status->set_floods(s.counters.floods);
+    writer_->Append(record_);
+    ++status_records_;
+  }
+
+  // At the end: forces still waiting for a frame will not get one.
+  void FlushPending() {
+    for (auto& [id, c] : clients_) {
+      while (!c.pending.empty()) {
+        WriteForceStep(id, &c, c.pending.front().force, c.last_step + 1);
+        c.last_step += 1;
+        c.pending.pop_front();
+      }
+    }
+  }
+
+  uint64_t steps() const { return steps_; }
+  uint64_t missing_steps() const { return missing_steps_; }
+  uint64_t forces_seen() const { return forces_seen_; }
+  uint64_t status_records() const { return status_records_; }
+  uint64_t from_forces() const { return from_forces_; }
+  std::size_t clients() const { return clients_.size(); }
+  const std::map<std::string, ClientState>& client_states() const { return clients_; }
+
+ private:
+  void WriteFrameStep(const hapco_idl_ContactStateFrame& f, ClientState* c) {
+    hapco::recording::Step* step = record_.mutable_step();
+    step->Clear();  // keeps the repeated field's allocated elements for reuse
+    step->set_step(f.step);
+    step->set_client_id(f.client_id);
+    step->set_time_ns(f.server_receive_ns);
+    Set(step->mutable_device_translation_m(), f.device_position_m);
+    Set(step->mutable_contact_force_n(), f.contact_force_n);
+    Set(step->mutable_device_force_n(), f.device_force_n);
+    step->set_solver_status(StatusName(f.solver_status));
+    step->set_iterations(f.iterations);
+    step->set_separating(f.separating_count);
+    step->set_sticking(f.sticking_count);
+    step->set_sliding(f.sliding_count);
+    for (uint32_t i = 0; i < f.contacts._length; ++i) {
+      const hapco_idl_ContactSample& s = f.contacts._buffer[i];
+      auto* sample = step->add_contacts();
+      sample->set_id(s.id);
+      Set(sample->mutable_position_m(), s.position_m);
+      Set(sample->mutable_normal(), s.normal);
+      Set(sample->mutable_force_n(), s.force_n);
+      sample->set_gap_m(s.gap_m);
+      sample->set_slip_m(s.slip_m);
+      sample->set_state(static_cast<hapco::recording::ContactState>(s.state));
+    }
+    // 0 = none (the client reported no round trip yet, -1 on the wire).
+    if (f.client_round_trip_ns > 0) step->set_round_trip_s(static_cast<double>(f.client_round_trip_ns) * 1e-9);
+    step->set_pose_sequence(f.pose_sequence);
+    step->set_server_time_s(static_cast<double>(f.server_send_ns - f.server_receive_ns) * 1e-9);
+    writer_->Append(record_);
+    ++c->steps;
+    ++steps_;
+  }
+
+  void WriteForceStep(const std::string& client_id, ClientState* c, const hapco_idl_FeedbackForce& f,
+                      uint64_t step_number) {
+    hapco::recording::Step* step = record_.mutable_step();
+    step->Clear();
+    step->set_step(step_number);
+    step->set_client_id(client_id);
+    step->set_time_ns(f.server_receive_ns);
+    Set(step->mutable_device_force_n(), f.force_n);
+    step->set_solver_status(StatusName(f.solver_status));
+    step->set_iterations(f.iterations);
+    step->set_separating(f.separating_count);
+    step->set_sticking(f.sticking_count);
+    step->set_sliding(f.sliding_count);
+    step->set_pose_sequence(f.pose_sequence);
+    step->set_server_time_s(static_cast<double>(f.server_send_ns - f.server_receive_ns) * 1e-9);
+    step->set_contacts_missing(true);
+    writer_->Append(record_);
+    ++c->steps;
+    ++c->from_forces;
+    ++steps_;
+    ++from_forces_;
+  }
+
+  hapco::io::RecordingWriter* writer_;
+  hapco::recording::Record record_;  // reused: no allocation per step once warmed up
+  std::map<std::string, ClientState> clients_;
+  uint64_t steps_ = 0, missing_steps_ = 0, forces_seen_ = 0, status_records_ = 0, from_forces_ = 0;
+};
+
+// Self-pipe: the handler only write()s the signal number (async-signal-safe); a thread reads
+// it and wakes the waitset (as in hapco-server).
+int g_signal_pipe[2] = {-1, -1};
+
+extern "C" void OnStopSignal(int signal) {
+  const unsigned char value = static_cast<unsigned char>(signal);
+  const ssize_t ignored = write(g_signal_pipe[1], &value, 1);
+  (void)ignored;
+}
+
+hapco::recording::Header MakeHeader(const Options& o) {
+  hapco::recording::Header header;
+  header.set_format_version(1);
+  header.set_hapco_version(HAPCO_VERSION);
+  header.set_writer("hapco-recorder");
+  header.set_created_unix_ns(static_cast<int64_t>(std::chrono::duration_cast<std::chrono::nanoseconds>(
+      std::chrono::system_clock::now().time_since_epoch()).count()));
+  if (!o.scene_path.empty()) {
+    const hapco::sim::SceneSpec scene = hapco::io::LoadSceneFile(o.scene_path);  // validates it
+    header.set_scene_name(scene.name);
+    std::ifstream in(o.scene_path);
+    header.set_scene_text(std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()));
+    header.set_solver(std::string(hapco::contact::SolverName(scene.solver)));
+  }
+  return header;
+}
+
+int Run(const Options& o) {
+  if (pipe(g_signal_pipe) != 0) throw std::runtime_error("pipe() failed");
+  struct sigaction action {};
+  action.sa_handler = &OnStopSignal;
+  sigemptyset(&action.sa_mask);
+  action.sa_flags = SA_RESTART;
+  sigaction(SIGINT, &action, nullptr);
+  sigaction(SIGTERM, &action, nullptr);
+
+  // The header goes first, before any DDS traffic: a recorder killed at any time leaves a
+  // file with its header. An unwritable path throws InputError (exit 1).
+  hapco::io::RecordingWriter writer(o.output, MakeHeader(o));
+  Recorder recorder(&writer);
+
+  using namespace hapco::service;
+  Participant participant(o.domain);
+  Topic<hapco_idl_ContactStateFrame> frame_topic(participant);
+  Topic<hapco_idl_FeedbackForce> force_topic(participant);
+  Topic<hapco_idl_ServerStatus> status_topic(participant);
+  Subscriber clients_subscriber(participant, kAllClientsPartition);
+  Subscriber default_subscriber(participant);
+  Reader<hapco_idl_ContactStateFrame> frame_reader(clients_subscriber, frame_topic, ContactStateQos(kFrameDepth));
+  Reader<hapco_idl_FeedbackForce> force_reader(clients_subscriber, force_topic, ForceQos().KeepLast(kForceDepth));
+  Reader<hapco_idl_ServerStatus> status_reader(default_subscriber, status_topic, StatusQos().KeepLast(kStatusDepth));
+  WaitSet waitset(participant);
+  waitset.Attach(frame_reader.data_condition(), 1);
+  waitset.Attach(force_reader.data_condition(), 2);
+  waitset.Attach(status_reader.data_condition(), 3);
+  std::printf("hapco-recorder: domain %d, recording to %s\n", o.domain, o.output.c_str());
+  std::fflush(stdout);
+
+  std::atomic<int> received{0};
+  std::atomic<bool> stop{false};
+  std::thread waiter([&] {
+    unsigned char value = 0;
+    while (read(g_signal_pipe[0], &value, 1) < 0 && errno == EINTR) {
+    }
+    received = value;  // 0: the main thread ended the loop itself
+    stop = true;
+    waitset.Wake();
+  });
+
+  auto frame = MakeSample<hapco_idl_ContactStateFrame>();
+  ReserveContacts(frame.get(), hapco_idl_MAX_CONTACT_SAMPLES);
+  hapco_idl_FeedbackForce force{};
+  auto status = MakeSample<hapco_idl_ServerStatus>();
+  bool server_seen = false;
+  // Forces first: the server writes a step's force before its frame, so the force (unless
+  // lost) is already pending when its frame is matched.
+  auto drain = [&] {
+    while (force_reader.Take(&force)) recorder.OnForce(force);
+    while (frame_reader.Take(frame.get())) recorder.OnFrame(*frame);
+    while (status_reader.Take(status.get())) {
+      recorder.OnStatus(*status);
+      if (!server_seen) {
+        server_seen = true;
+        std::printf("hapco-recorder: server '%s' found\n", status->server_id);
+        std::fflush(stdout);
+      }
+    }
+  };
+
+  const int64_t start_ns = hapco::MonotonicNowNs();
+  const int64_t end_ns = o.duration_s > 0 ? start_ns + static_cast<int64_t>(o.duration_s * 1e9) : INT64_MAX;
+  int64_t next_progress_ns = start_ns + 1'000'000'000;
+  auto stop_waiter = [&] {
+    const unsigned char zero = 0;
+    if (write(g_signal_pipe[1], &zero, 1) != 1) std::perror("hapco-recorder: write");
+    waiter.join();
+  };
+  try {
+    while (!stop) {
+      const int64_t now = hapco::MonotonicNowNs();
+      if (now >= end_ns) break;
+      const int64_t wait_ns = std::min<int64_t>({end_ns - now, next_progress_ns - now, 200'000'000});
+      waitset.Wait(std::max<int64_t>(wait_ns, 0));
+      drain();
+      if (hapco::MonotonicNowNs() >= next_progress_ns) {
+        next_progress_ns += 1'000'000'000;
+        if (!o.quiet) {
+          std::fprintf(stderr, "hapco-recorder: %llu records, %zu clients, %llu missing steps\n",
+                       static_cast<unsigned long long>(writer.records_written()), recorder.clients(),
+                       static_cast<unsigned long long>(recorder.missing_steps()));
+        }
+      }
+    }
+    drain();  // what was received before the stop
+    recorder.FlushPending();
+  } catch (...) {
+    stop_waiter();
+    throw;
+  }
+  stop_waiter();
+  std::printf("hapco-recorder: %llu steps from %zu clients, %llu missing steps, %llu status records, "
+              "%llu forces seen, file %s (%llu steps from forces alone; stopped by %s)\n",
+              static_cast<unsigned long long>(recorder.steps()), recorder.clients(),
+              static_cast<unsigned long long>(recorder.missing_steps()),
+              static_cast<unsigned long long>(recorder.status_records()),
+              static_cast<unsigned long long>(recorder.forces_seen()), o.output.c_str(),
+              static_cast<unsigned long long>(recorder.from_forces()),
+              received == SIGINT ? "SIGINT" : received == SIGTERM ? "SIGTERM" : "--duration");
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  return hapco::cli::RunMain("hapco-recorder", [&] { return Run(Parse(argc, argv)); });
+}
