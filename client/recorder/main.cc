@@ -68,6 +68,7 @@ constexpr int32_t kStatusDepth = 16;
 // Forces waiting for their frame, per client: beyond this (frames stopped arriving) the
 // oldest is written on its own.
 constexpr std::size_t kMaxPendingForces = 4096;
+constexpr uint64_t kLateWindow = 64;
 
 struct Options {
   std::string output, scene_path;
@@ -129,21 +130,17 @@ void Set(hapco::recording::Vec3* out, const hapco_idl_Vec3& v) {
 // Matching of forces to frames, per client. The server writes, per step, the force then the
 // frame, both in step order; frames are reliable (they arrive in order, or not at all when
 // the server's keep-last history dropped them), forces best effort. A force waits in
-// `pending` until a frame with the same or a later pose sequence arrives: same = matched
-// (the frame is the record), later = its frame is lost for good, so the force is written as
-// a step of its own (contacts_missing). A client restart (pose sequence not increasing) or a
-// new session (step counter restarting) starts a new epoch in either stream.
-struct PendingForce {
-  uint64_t epoch;
-  hapco_idl_FeedbackForce force;
-};
-
+// `pending` (arrival order = server order) until the frame with its pose sequence arrives:
+// then it is matched (the frame is the record) and every force before it lost its frame for
+// good, so each of those is written as a step of its own (contacts_missing). If a frame's
+// own force was lost, the pending forces with a lower pose sequence are the ones before it.
+// Pose sequences restart when a client restarts, step counters when a session is re-opened:
+// matching is by equality first, so a restart costs at most force-only records for forces
+// whose frames were lost around it (docs/recorder.md).
 struct ClientState {
   bool have_frame = false;
-  uint64_t last_step = 0, last_frame_sequence = 0, frame_epoch = 0;
-  bool have_force = false;
-  uint64_t last_force_sequence = 0, force_epoch = 0;
-  std::deque<PendingForce> pending;
+  uint64_t last_step = 0, last_frame_sequence = 0;
+  std::deque<hapco_idl_FeedbackForce> pending;
   uint64_t steps = 0;           // Step records written for this client
   uint64_t missing_steps = 0;   // gaps in the server step counter (frames never received)
   uint64_t from_forces = 0;     // Step records written from a force alone
@@ -152,22 +149,21 @@ struct ClientState {
 
 class Recorder {
  public:
-  Recorder(hapco::io::RecordingWriter* writer) : writer_(writer) {}
+  explicit Recorder(hapco::io::RecordingWriter* writer) : writer_(writer) {}
 
   void OnForce(const hapco_idl_FeedbackForce& force) {
     ++forces_seen_;
     ClientState& c = clients_[force.client_id];
-    if (c.have_force && force.pose_sequence <= c.last_force_sequence) ++c.force_epoch;
-    c.have_force = true;
-    c.last_force_sequence = force.pose_sequence;
-    if (c.have_frame && c.force_epoch == c.frame_epoch && force.pose_sequence <= c.last_frame_sequence) {
-      ++c.late_forces;  // its frame was written already (or its gap is passed)
+    // Arrived after its frame (recorded already): a sequence at most kLateWindow below the
+    // last frame's. Further below is a restarted client's new sequence, kept.
+    if (c.have_frame && force.pose_sequence <= c.last_frame_sequence &&
+        c.last_frame_sequence - force.pose_sequence < kLateWindow) {
+      ++c.late_forces;
       return;
     }
-    c.pending.push_back({c.force_epoch, force});
-    if (c.pending.size() > kMaxPendingForces) {
-      WriteForceStep(force.client_id, &c, c.pending.front().force, c.last_step + 1);
-      c.last_step += 1;
+    c.pending.push_back(force);
+    if (c.pending.size() > kMaxPendingForces) {  // frames stopped arriving: write the oldest
+      WriteForceStep(force.client_id, &c, c.pending.front(), c.last_step + 1);
       c.pending.pop_front();
     }
   }
@@ -175,29 +171,41 @@ class Recorder {
   void OnFrame(const hapco_idl_ContactStateFrame& frame) {
     ClientState& c = clients_[frame.client_id];
     const bool new_session = c.have_frame && frame.step <= c.last_step;
-    if (c.have_frame && (new_session || frame.pose_sequence <= c.last_frame_sequence)) ++c.frame_epoch;
-    const uint64_t previous_step = (c.have_frame && !new_session) ? c.last_step : 0;
-    if (c.have_frame && !new_session && frame.step > c.last_step + 1) {
-      c.missing_steps += frame.step - c.last_step - 1;
-      missing_steps_ += frame.step - c.last_step - 1;
+    // Steps without a frame: a gap after the previous frame, or the steps before the first
+    // frame of a session (the counter starts at 1; a recorder started mid-session counts the
+    // steps it did not see).
+    const uint64_t previous = (c.have_frame && !new_session) ? c.last_step : 0;
+    if (frame.step > previous + 1) {
+      c.missing_steps += frame.step - previous - 1;
+      missing_steps_ += frame.step - previous - 1;
     }
-    // Forces older than this frame: their frames are lost. Their step numbers are the next
-    // ones after the previous frame: exact when every force of the gap arrived, else the
-    // lowest possible (docs/recorder.md).
-    uint64_t next_step = previous_step + 1;
-    while (!c.pending.empty()) {
-      const PendingForce& p = c.pending.front();
-      const bool older = p.epoch < c.frame_epoch ||
-                         (p.epoch == c.frame_epoch && p.force.pose_sequence < frame.pose_sequence);
-      const bool same = p.epoch == c.frame_epoch && p.force.pose_sequence == frame.pose_sequence;
-      if (older) {
-        WriteForceStep(frame.client_id, &c, p.force, std::min(next_step++, frame.step - 1));
-      } else if (!same) {
+    // The forces before this frame's: matched by equality, else those with lower sequences.
+    std::size_t before = 0;
+    bool matched = false;
+    for (std::size_t i = 0; i < c.pending.size(); ++i) {
+      if (c.pending[i].pose_sequence == frame.pose_sequence) {
+        before = i;
+        matched = true;
         break;
       }
-      c.pending.pop_front();
-      if (same) break;
     }
+    if (!matched) {
+      while (before < c.pending.size() && c.pending[before].pose_sequence < frame.pose_sequence) ++before;
+    }
+    // Their step numbers follow the previous frame's: exact when every force of the gap
+    // arrived, else the lowest possible; before the first frame, the ones just before it.
+    for (std::size_t i = 0; i < before; ++i) {
+      uint64_t number = 0;  // 0 = unknown
+      if (c.have_frame) {
+        number = c.last_step + 1 + i;
+        if (!new_session) number = std::min(number, frame.step - 1);
+      } else if (frame.step > before) {
+        number = frame.step - before + i;
+      }
+      WriteForceStep(frame.client_id, &c, c.pending.front(), number);
+      c.pending.pop_front();
+    }
+    if (matched) c.pending.pop_front();
     c.have_frame = true;
     c.last_step = frame.step;
     c.last_frame_sequence = frame.pose_sequence;
@@ -228,9 +236,8 @@ class Recorder {
   // At the end: forces still waiting for a frame will not get one.
   void FlushPending() {
     for (auto& [id, c] : clients_) {
-      while (!c.pending.empty()) {
-        WriteForceStep(id, &c, c.pending.front().force, c.last_step + 1);
-        c.last_step += 1;
+      for (uint64_t number = c.last_step + 1; !c.pending.empty(); ++number) {
+        WriteForceStep(id, &c, c.pending.front(), number);
         c.pending.pop_front();
       }
     }
