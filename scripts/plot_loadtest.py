@@ -1,0 +1,227 @@
+#!/usr/bin/python3
+"""Charts of hapco-loadtest results (docs/load-and-network.md).
+
+  plot_loadtest.py run --csv-dir DIR
+      one run: DIR/roundtrip-cdf.png (round trip CDF per client), DIR/forces.png (rendered vs
+      server force and the passivity energy of the first client)
+  plot_loadtest.py capacity --csv CAPACITY.csv --runs-dir DIR --out PREFIX
+      PREFIX-roundtrip.png (p50/p99/p99.9 vs N), PREFIX-missed.png (missed % vs N),
+      PREFIX-server.png (server step time and CPU vs N), PREFIX-cdf.png (round trip CDF per N,
+      from DIR/n<N>/roundtrip.csv)
+  plot_loadtest.py network --csv NETWORK.csv --runs-dir DIR --out PREFIX
+      PREFIX-delay.png (stability vs delay), PREFIX-loss.png (stability vs loss),
+      PREFIX-traces.png (force traces at 0 / 5 / 20 ms, from DIR/<case>/ticks-*.csv)
+"""
+import argparse
+import csv
+import glob
+import math
+import os
+import sys
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+plt.rcParams.update({"figure.dpi": 90, "font.size": 9})
+
+
+def read_csv(path):
+    with open(path, newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def num(row, key):
+    try:
+        return float(row[key])
+    except (KeyError, ValueError):
+        return math.nan
+
+
+def cdf(ax, values, label):
+    values = sorted(values)
+    if not values:
+        return
+    n = len(values)
+    ax.plot([v / 1000.0 for v in values], [(i + 1) / n for i in range(n)], label=label, lw=1)
+
+
+def roundtrips(path):
+    by_client = {}
+    for row in read_csv(path):
+        by_client.setdefault(row["client"], []).append(float(row["round_trip_us"]))
+    return by_client
+
+
+def save(fig, path):
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    print("wrote", path)
+
+
+def force_panel(ax_f, ax_e, ticks_path, t_begin=None, t_end=None, title=""):
+    rows = read_csv(ticks_path)
+    t = [num(r, "time_s") for r in rows]
+    if t_begin is None:
+        t_begin, t_end = t[0], t[-1]
+    sel = [i for i, x in enumerate(t) if t_begin <= x <= t_end]
+    tt = [t[i] for i in sel]
+    for axis, colour in (("z", "C0"), ("x", "C1")):
+        ax_f.plot(tt, [num(rows[i], "server_f%s_n" % axis) for i in sel], color=colour, lw=2.5, alpha=0.35,
+                  label="server F%s (for the tick's pose)" % axis)
+        ax_f.plot(tt, [num(rows[i], "f%s_n" % axis) for i in sel], color=colour, lw=0.9, label="rendered F%s" % axis)
+    stale = [tt[k] for k, i in enumerate(sel) if rows[i]["stale"] == "1"]
+    if stale:
+        ax_f.plot(stale, [0.0] * len(stale), "r|", ms=6, label="stale ticks")
+    ax_f.set_ylabel("force, N")
+    ax_f.set_title(title)
+    ax_f.legend(fontsize=7, loc="upper right")
+    if ax_e is not None:
+        ax_e.plot(tt, [num(rows[i], "energy_j") * 1000 for i in sel], color="k", lw=1)
+        ax_e.axhline(0, color="r", lw=0.6)
+        ax_e.set_ylabel("passivity E, mJ")
+        ax_e.set_xlabel("time since the client started, s")
+
+
+def plot_run(args):
+    d = args.csv_dir
+    rt = roundtrips(os.path.join(d, "roundtrip.csv"))
+    fig, ax = plt.subplots(figsize=(6, 3.5))
+    for client, values in sorted(rt.items()):
+        cdf(ax, values, client)
+    ax.set_xscale("log")
+    ax.set_xlabel("round trip (pose sampled -> force arrived), ms")
+    ax.set_ylabel("fraction of forces")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7)
+    save(fig, os.path.join(d, "roundtrip-cdf.png"))
+    ticks = sorted(glob.glob(os.path.join(d, "ticks-*.csv")))
+    if ticks:
+        fig, (a, b) = plt.subplots(2, 1, figsize=(7, 5), sharex=True, gridspec_kw={"height_ratios": [2, 1]})
+        force_panel(a, b, ticks[0], title=os.path.basename(ticks[0]))
+        save(fig, os.path.join(d, "forces.png"))
+
+
+def plot_capacity(args):
+    rows = [r for r in read_csv(args.csv)]
+    n = [num(r, "clients") for r in rows]
+    fig, ax = plt.subplots(figsize=(5, 3.2))
+    for key, label in (("rt_p50_us", "p50"), ("rt_p99_us", "p99"), ("rt_p999_us", "p99.9")):
+        ax.plot(n, [num(r, key) / 1000 for r in rows], "o-", label=label)
+    ax.axhline(1.0, color="grey", lw=0.6, ls="--")
+    ax.set_yscale("log")
+    ax.set_xlabel("clients N (benchmark 1, 1 kHz each)")
+    ax.set_ylabel("round trip, ms")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend()
+    save(fig, args.out + "-roundtrip.png")
+
+    fig, ax = plt.subplots(figsize=(5, 3.2))
+    ax.plot(n, [num(r, "lost_pct") for r in rows], "o-", label="lost: missed + never answered")
+    ax.plot(n, [num(r, "missed_pct") for r in rows], "s--", label="servo ticks missed (client)")
+    ax.plot(n, [100.0 * num(r, "ticks_without_fresh_force") / max(1.0, num(r, "poses")) for r in rows], "^:",
+            label="ticks without a new force")
+    ax.axhline(1.0, color="r", lw=0.8, label="1 % limit")
+    ax.set_xlabel("clients N")
+    ax.set_ylabel("% of ticks")
+    ax.set_yscale("symlog", linthresh=1)
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=7)
+    save(fig, args.out + "-missed.png")
+
+    fig, ax = plt.subplots(figsize=(5, 3.2))
+    ax.plot(n, [num(r, "server_step_p50_us") for r in rows], "o-", label="step p50")
+    ax.plot(n, [num(r, "server_step_p99_us") for r in rows], "s-", label="step p99")
+    ax.set_xlabel("clients N")
+    ax.set_ylabel("server step time, us")
+    ax.grid(True, alpha=0.3)
+    ax2 = ax.twinx()
+    ax2.plot(n, [num(r, "server_cpu") for r in rows], "k^--", label="server CPU (cores)")
+    ax2.set_ylabel("server CPU, cores")
+    ax2.set_ylim(bottom=0)
+    h1, l1 = ax.get_legend_handles_labels()
+    h2, l2 = ax2.get_legend_handles_labels()
+    ax.legend(h1 + h2, l1 + l2, fontsize=7, loc="upper left")
+    save(fig, args.out + "-server.png")
+
+    fig, ax = plt.subplots(figsize=(5, 3.2))
+    for r in rows:
+        path = os.path.join(args.runs_dir, "n%d" % int(num(r, "clients")), "roundtrip.csv")
+        if os.path.exists(path):
+            values = [v for vs in roundtrips(path).values() for v in vs]
+            cdf(ax, values, "N = %d" % int(num(r, "clients")))
+    ax.set_xscale("log")
+    ax.set_xlabel("round trip, ms (all clients)")
+    ax.set_ylabel("fraction of forces")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7)
+    save(fig, args.out + "-cdf.png")
+
+
+def plot_network(args):
+    rows = read_csv(args.csv)
+
+    def series(x_key, fixed):
+        sel = [r for r in rows if all(abs(num(r, k) - v) < 1e-9 for k, v in fixed.items())]
+        return sorted(sel, key=lambda r: num(r, x_key))
+
+    panels = (("tracking_rms_n", "tracking error rms, N"), ("hf_ratio", "HF ratio (rendered / server)"),
+              ("passivity_min_j", "passivity min E, J"), ("stale_ticks", "stale ticks"))
+    for x_key, fixed_sets, xlabel, name in (
+            ("delay_ms", [({"loss_pct": 0, "jitter_ms": 0}, "no loss, no jitter"),
+                          ({"loss_pct": 0, "jitter_ms": 1}, "jitter 1 ms"),
+                          ({"loss_pct": 1, "jitter_ms": 0}, "loss 1 %")], "one-way delay, ms", "delay"),
+            ("loss_pct", [({"delay_ms": 0, "jitter_ms": 0}, "no delay"),
+                          ({"delay_ms": 5, "jitter_ms": 0}, "delay 5 ms")], "loss per direction, %", "loss")):
+        fig, axes = plt.subplots(1, 4, figsize=(11, 2.8))
+        modes = sorted(set(r["mode"] for r in rows))
+        for ax, (key, label) in zip(axes, panels):
+            for k, (fixed, legend) in enumerate(fixed_sets):
+                for mode in modes:
+                    s = [r for r in series(x_key, fixed) if r["mode"] == mode]
+                    if len(s) >= 1:
+                        ax.plot([num(r, x_key) for r in s], [num(r, key) for r in s],
+                                "o-" if mode == "kinematic" else "s--", color="C%d" % k,
+                                label="%s, %s" % (legend, mode))
+            ax.set_xlabel(xlabel)
+            ax.set_title(label, fontsize=8)
+            ax.grid(True, alpha=0.3)
+            if key == "passivity_min_j":
+                ax.axhline(0, color="r", lw=0.6)
+        axes[0].legend(fontsize=7)
+        save(fig, "%s-%s.png" % (args.out, name))
+
+    cases = [c for c in ("d0_j0_l0", "d5_j0_l0", "d20_j0_l0") if os.path.isdir(os.path.join(args.runs_dir, c))]
+    if cases:
+        fig, axes = plt.subplots(len(cases), 1, figsize=(7, 2.2 * len(cases)), sharex=True)
+        if len(cases) == 1:
+            axes = [axes]
+        for ax, case in zip(axes, cases):
+            ticks = sorted(glob.glob(os.path.join(args.runs_dir, case, "ticks-*.csv")))
+            if ticks:
+                force_panel(ax, None, ticks[0], 0.0, 1.3, title="%s (%s)" % (case, os.path.basename(ticks[0])))
+        axes[-1].set_xlabel("time since the client started, s")
+        save(fig, args.out + "-traces.png")
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = p.add_subparsers(dest="what", required=True)
+    r = sub.add_parser("run")
+    r.add_argument("--csv-dir", required=True)
+    c = sub.add_parser("capacity")
+    c.add_argument("--csv", required=True)
+    c.add_argument("--runs-dir", required=True)
+    c.add_argument("--out", required=True)
+    n = sub.add_parser("network")
+    n.add_argument("--csv", required=True)
+    n.add_argument("--runs-dir", required=True)
+    n.add_argument("--out", required=True)
+    args = p.parse_args()
+    {"run": plot_run, "capacity": plot_capacity, "network": plot_network}[args.what](args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

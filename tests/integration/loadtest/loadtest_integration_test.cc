@@ -1,0 +1,136 @@
+// hapco-server + hapco-loadtest as processes on loopback (coarse scene, 2 clients, ~3 s,
+// kinematic, trajectory looped). Checks the report's invariants from the per-tick CSVs, read
+// independently of the tool's own summary: no NaN, forces within the device's 7.9 N and the
+// 0.25 N/tick rate limit, every client received forces, summary counts that add up, and the
+// passivity observer recomputed from positions and forces (E >= 0 without delay).
+#include <gtest/gtest.h>
+#include <signal.h>
+
+#include <cmath>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "../process_support.h"
+
+namespace hapco::service {
+namespace {
+
+const std::string kScene = std::string(HAPCO_SOURCE_DIR) + "/tests/data/scenes/coarse.txtpb";
+constexpr double kMaxForceN = 7.9;        // phantom.h SafetyParameters
+constexpr double kMaxChangeN = 0.25;      // per tick
+constexpr double kPassivityToleranceJ = 1e-4;  // docs/load-and-network.md
+
+long long Int(const std::map<std::string, std::string>& row, const char* key) { return std::stoll(row.at(key)); }
+double Num(const std::map<std::string, std::string>& row, const char* key) { return std::stod(row.at(key)); }
+
+TEST(LoadTestProcess, TwoClientsOnLoopbackKeepTheReportInvariants) {
+  const std::string dir = TestDir();
+  const std::string domain = std::to_string(SetUpTestDomain());
+  Process server({HAPCO_SERVER_EXE, kScene, "--domain", domain, "--status-period", "0.2", "--rt-priority", "80", "--quiet"},
+                 dir + "/server.out", dir + "/server.err");
+  {
+    Process loadtest({HAPCO_LOADTEST_EXE, kScene, "--clients", "2", "--duration", "3", "--domain", domain,
+                      "--trajectory-loop", "--client-prefix", "it", "--csv-dir", dir, "--rt-priority", "80",
+                      "--connect-timeout-s", "60"},
+                     dir + "/loadtest.out", dir + "/loadtest.err");
+    ASSERT_EQ(loadtest.Wait(120'000), 0) << ReadFile(dir + "/loadtest.err");
+  }
+  server.Signal(SIGTERM);
+  ASSERT_EQ(server.Wait(30'000), 0) << ReadFile(dir + "/server.err");
+  std::printf("%s", ReadFile(dir + "/loadtest.out").c_str());
+
+  const auto summary = ReadCsv(dir + "/summary.csv");
+  ASSERT_EQ(summary.size(), 3u);
+  std::map<std::string, std::map<std::string, std::string>> by_client;
+  for (const auto& row : summary) by_client[row.at("client")] = row;
+  ASSERT_TRUE(by_client.count("it-1") && by_client.count("it-2") && by_client.count("all"));
+
+  std::map<std::string, long long> roundtrips;
+  for (const auto& row : ReadCsv(dir + "/roundtrip.csv")) {
+    ++roundtrips[row.at("client")];
+    EXPECT_GT(Num(row, "round_trip_us"), 0.0);
+  }
+
+  std::map<std::string, long long> sums;
+  for (const std::string id : {"it-1", "it-2"}) {
+    SCOPED_TRACE(id);
+    const auto& s = by_client[id];
+    const auto ticks = ReadCsv(dir + "/ticks-" + id + ".csv");
+    ASSERT_FALSE(ticks.empty());
+    long long published = 0, forces = 0, stale = 0;
+    double energy = 0, min_energy = 0, energy_after_press = 0;
+    Eigen::Vector3d previous = Eigen::Vector3d::Zero();
+    for (std::size_t i = 0; i < ticks.size(); ++i) {
+      const auto& t = ticks[i];
+      const Eigen::Vector3d f = Vec(t, "fx_n", "fy_n", "fz_n");
+      ASSERT_TRUE(f.allFinite()) << "tick " << i;
+      EXPECT_LE(f.norm(), kMaxForceN + 1e-9) << "tick " << i;
+      // The safety filter limits the change between consecutive ticks that ran (0.25 N per
+      // tick; during a timeout ramp, linear in time, 250 N/s over the tick's interval).
+      const double dt_s = i == 0 ? 0.0 : Num(t, "time_s") - Num(ticks[i - 1], "time_s");
+      const double limit = Int(t, "stale") == 1 ? std::max(kMaxChangeN, 250.0 * dt_s) : kMaxChangeN;
+      EXPECT_LE((f - previous).norm(), limit + 1e-6) << "tick " << i;  // time_s is logged to 1 ns
+      previous = f;
+      published += Int(t, "published");
+      forces += Int(t, "forces_taken");
+      stale += Int(t, "stale");
+      // Passivity observer from the logged positions: v dt = x(k) - x(k-1) in kinematic mode.
+      const Eigen::Vector3d x = Vec(t, "x_m", "y_m", "z_m");
+      const Eigen::Vector3d x_previous = i == 0 ? Eigen::Vector3d::Zero() : Vec(ticks[i - 1], "x_m", "y_m", "z_m");
+      if (Int(t, "published") == 1) energy += -f.dot(x - x_previous);
+      min_energy = std::min(min_energy, energy);
+      EXPECT_NEAR(Num(t, "energy_j"), energy, 1e-6 + 1e-6 * std::abs(energy)) << "tick " << i;
+      // The scene presses 3 mm down in its first 30 steps: +z force against -z motion puts
+      // energy in (the sign convention of the observer).
+      if (Int(t, "tick") == 30) energy_after_press = energy;
+    }
+    EXPECT_GT(energy_after_press, 0.0);
+    EXPECT_GE(min_energy, -kPassivityToleranceJ);
+    EXPECT_NEAR(Num(s, "passivity_min_j"), min_energy, 1e-6);
+    EXPECT_EQ(Int(s, "passivity_violated"), 0);
+
+    // Counts in the summary match the per-tick log and the round-trip log.
+    EXPECT_EQ(Int(s, "ticks_run"), static_cast<long long>(ticks.size()));
+    EXPECT_EQ(Int(s, "poses"), published);
+    EXPECT_EQ(Int(s, "poses"), 3000);  // 3 s at 1 kHz
+    EXPECT_EQ(Int(s, "forces"), forces);
+    EXPECT_EQ(roundtrips[id], forces);
+    EXPECT_EQ(Int(s, "stale_ticks"), stale);
+    EXPECT_GT(forces, 1500) << "each client must receive forces";  // best effort on a busy machine
+    EXPECT_EQ(Int(s, "non_finite_rendered"), 0);
+    EXPECT_LE(Num(s, "peak_rendered_n"), kMaxForceN + 1e-6);
+    // Each force taken answers a distinct pose (in-order sequences): the rest never got one.
+    EXPECT_EQ(Int(s, "unanswered_poses"), Int(s, "poses") - Int(s, "forces"));
+    EXPECT_LE(Num(s, "rt_p50_us"), Num(s, "rt_p99_us"));
+    EXPECT_LE(Num(s, "rt_p99_us"), Num(s, "rt_max_us"));
+    for (const char* key : {"ticks_run", "poses", "forces", "missed_ticks", "stale_ticks", "server_losses",
+                            "unanswered_poses"}) {
+      sums[key] += Int(s, key);
+    }
+  }
+  const auto& all = by_client["all"];
+  for (const auto& [key, value] : sums) EXPECT_EQ(Int(all, key.c_str()), value) << key;
+  // Server status read over DDS: both sessions, real step times.
+  EXPECT_GE(Int(all, "server_status_periods"), 1);
+  EXPECT_EQ(Int(all, "server_sessions_max"), 2);
+  EXPECT_GT(Num(all, "server_step_p50_us"), 0.0);
+  EXPECT_GT(Num(all, "server_cpu"), 0.0);
+}
+
+TEST(LoadTestProcess, NoServerExitsWithCode2AndBadInputWith1) {
+  const std::string dir = TestDir();
+  const std::string domain = std::to_string(SetUpTestDomain());
+  {
+    Process loadtest({HAPCO_LOADTEST_EXE, kScene, "--clients", "1", "--duration", "1", "--domain", domain,
+                      "--connect-timeout-s", "0.5"},
+                     dir + "/none.out", dir + "/none.err");
+    EXPECT_EQ(loadtest.Wait(60'000), 2) << ReadFile(dir + "/none.err");
+  }
+  Process bad({HAPCO_LOADTEST_EXE, kScene, "--clients", "0", "--duration", "1"}, dir + "/bad.out", dir + "/bad.err");
+  EXPECT_EQ(bad.Wait(60'000), 1);
+  EXPECT_NE(ReadFile(dir + "/bad.err").find("--clients"), std::string::npos) << ReadFile(dir + "/bad.err");
+}
+
+}  // namespace
+}  // namespace hapco::service
