@@ -49,10 +49,12 @@ bool WaitForMatched(dds_entity_t reader_or_writer, bool is_writer, uint32_t coun
   const dds_time_t deadline = dds_time() + timeout_ns;
   Entity waitset(CheckEntity(dds_create_waitset(dds_get_participant(reader_or_writer)),
                              "dds_create_waitset"));
-  // The entity triggers the waitset when a status in its mask changes.
+  // The entity triggers the waitset while a status in its mask is set. Only the matched
+  // status (reset by reading it): any other status left set (e.g. data available, which a
+  // listener never resets for the waitset) would wake the wait at once, for ever.
   uint32_t old_mask = 0;
   CheckReturn(dds_get_status_mask(reader_or_writer, &old_mask), "dds_get_status_mask");
-  CheckReturn(dds_set_status_mask(reader_or_writer, old_mask | mask), "dds_set_status_mask");
+  CheckReturn(dds_set_status_mask(reader_or_writer, mask), "dds_set_status_mask");
   CheckReturn(dds_waitset_attach(waitset.handle(), reader_or_writer, 0), "dds_waitset_attach");
   bool matched = false;
   for (;;) {
@@ -61,9 +63,9 @@ bool WaitForMatched(dds_entity_t reader_or_writer, bool is_writer, uint32_t coun
       matched = true;
       break;
     }
+    if (dds_time() >= deadline) break;  // also when spurious wake-ups never let the wait time out
     const dds_return_t n = dds_waitset_wait_until(waitset.handle(), nullptr, 0, deadline);
     CheckReturn(n, "dds_waitset_wait_until");
-    if (n == 0 && MatchedCount(reader_or_writer, is_writer) < count) break;  // deadline
   }
   dds_waitset_detach(waitset.handle(), reader_or_writer);
   dds_set_status_mask(reader_or_writer, old_mask);

@@ -92,7 +92,7 @@ Qos ForceQos() { return StreamQos(); }
 
 Qos ContactStateQos(int32_t depth) {
   Qos q;
-  q.Reliable(0).KeepLast(depth).Volatile().LatencyBudget(0);
+  q.Reliable(0).KeepLast(depth).TransientLocal().LatencyBudget(0);
   return q;
 }
 

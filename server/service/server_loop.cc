@@ -160,6 +160,7 @@ void ServerLoop::ProcessSessionControls() {
     auto it = sessions_.find(id);
     switch (control.command) {
       case hapco_idl_SESSION_JOIN:
+        left_clients_.erase(id);
         if (it == sessions_.end()) {
           OpenSession(id);
         } else {
@@ -178,6 +179,10 @@ void ServerLoop::ProcessSessionControls() {
           closed_session_counters_.contact_frames_dropped += c.contact_frames_dropped;
           closed_session_counters_.sequence_gaps += c.sequence_gaps;
           sessions_.erase(it);
+          // Poses of this client still in flight must not reopen the session: it has to
+          // SESSION_JOIN again (a restarted server, which has no such record, still opens a
+          // session on a client's first pose, so clients resume after a server restart).
+          left_clients_.insert(id);
           ++counters_.sessions_closed;
           Log(kLogSession, "session closed for '" + id + "'");
         }
@@ -223,6 +228,10 @@ void ServerLoop::ProcessPoses() {
     auto it = sessions_.find(id);
     Client* client = nullptr;
     if (it == sessions_.end()) {
+      if (left_clients_.count(id) != 0) {
+        ++counters_.poses_after_leave;
+        continue;  // in flight when the client left; not bad input
+      }
       const PoseVerdict first = CheckStateless(pose, options_.limits);
       if (first != PoseVerdict::kAccept) {
         Count(first, id);

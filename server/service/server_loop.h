@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <cstdio>
 #include <map>
+#include <set>
 #include <memory>
 #include <string>
 #include <vector>
@@ -48,6 +49,7 @@ struct ServerCounters {
   uint64_t sessions_opened = 0;
   uint64_t sessions_closed = 0;
   uint64_t status_published = 0;
+  uint64_t poses_after_leave = 0;   // poses of a client that left, ignored until it joins again
 };
 
 class ServerLoop {
@@ -99,6 +101,7 @@ class ServerLoop {
   Writer<hapco_idl_ServerStatus> status_writer_;
   WaitSet waitset_;
   std::map<std::string, Client> sessions_;
+  std::set<std::string> left_clients_;  // sent SESSION_LEAVE and not joined since
   std::atomic<bool> stop_{false};
   ServerCounters counters_;
   // Counters of sessions closed so far (live sessions are added on demand).

@@ -45,8 +45,8 @@ TEST(QosProfiles, MatchTheDocumentedTable) {
   // Values from docs/dds-qos.md, the table the server and clients are written against.
   ExpectProfile(PoseQos(), {DDS_RELIABILITY_BEST_EFFORT, 0, 1, DDS_DURABILITY_VOLATILE});
   ExpectProfile(ForceQos(), {DDS_RELIABILITY_BEST_EFFORT, 0, 1, DDS_DURABILITY_VOLATILE});
-  ExpectProfile(ContactStateQos(), {DDS_RELIABILITY_RELIABLE, 0, 8, DDS_DURABILITY_VOLATILE});
-  ExpectProfile(ContactStateQos(3), {DDS_RELIABILITY_RELIABLE, 0, 3, DDS_DURABILITY_VOLATILE});
+  ExpectProfile(ContactStateQos(), {DDS_RELIABILITY_RELIABLE, 0, 8, DDS_DURABILITY_TRANSIENT_LOCAL});
+  ExpectProfile(ContactStateQos(3), {DDS_RELIABILITY_RELIABLE, 0, 3, DDS_DURABILITY_TRANSIENT_LOCAL});
   ExpectProfile(StatusQos(), {DDS_RELIABILITY_RELIABLE, 0, 1, DDS_DURABILITY_TRANSIENT_LOCAL});
   ExpectProfile(SessionQos(), {DDS_RELIABILITY_RELIABLE, 0, 8, DDS_DURABILITY_VOLATILE});
 }
