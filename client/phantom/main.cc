@@ -39,9 +39,10 @@ A simulated haptic device that drives a hapco-server session at 1 kHz.
                       of x_m,y_m,z_m rows (one per tick; a header line is skipped)
   --duration S        run S seconds (holding the trajectory's last point after its end);
                       default: the trajectory's length
-  --csv FILE          one row per tick (tick, pose sequence, position, force sequence, raw
-                      force, rendered force, round trip; force sequence -1 = no new force),
-                      plus a row per extra force received within the same tick
+  --csv FILE          one row per tick (tick, time, pose sequence, position, force sequence,
+                      raw force, rendered force, round trip, render latency, stale flag;
+                      force sequence -1 = no new force), plus a row per extra force received
+                      within the same tick
   --timeout-ms T      no new force for T ms -> the rendered force ramps to zero in 20 ms
                       (default 50); it resumes (rate limited) when forces return
   --rt-priority N     SCHED_FIFO priority 1..99 for the tick (needs CAP_SYS_NICE; default 0)
@@ -126,8 +127,8 @@ void WriteCsvRows(std::FILE* csv, const hapco::phantom::TickRecord& t) {
   // One row per force taken this tick (the last one is rendered), or one row without a force.
   const auto row = [&](long long force_sequence, const Eigen::Vector3d& raw, double round_trip_us,
                        double render_latency_us) {
-    std::fprintf(csv, "%d,%lld,%.12g,%.12g,%.12g,%lld,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%.1f,%.1f,%d\n", t.tick,
-                 t.published ? static_cast<long long>(t.pose_sequence) : -1LL, t.position_m.x(), t.position_m.y(),
+    std::fprintf(csv, "%d,%.6f,%lld,%.12g,%.12g,%.12g,%lld,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%.1f,%.1f,%d\n", t.tick,
+                 t.time_s, t.published ? static_cast<long long>(t.pose_sequence) : -1LL, t.position_m.x(), t.position_m.y(),
                  t.position_m.z(), force_sequence, raw.x(), raw.y(), raw.z(), t.rendered_force_n.x(),
                  t.rendered_force_n.y(), t.rendered_force_n.z(), round_trip_us, render_latency_us, t.stale ? 1 : 0);
   };
@@ -162,7 +163,7 @@ int Run(const Options& o) {
   if (!o.csv_path.empty()) {
     csv = std::fopen(o.csv_path.c_str(), "w");
     if (csv == nullptr) throw InputError("cannot write " + o.csv_path);
-    std::fprintf(csv, "tick,sequence,x_m,y_m,z_m,force_sequence,raw_fx_n,raw_fy_n,raw_fz_n,"
+    std::fprintf(csv, "tick,time_s,sequence,x_m,y_m,z_m,force_sequence,raw_fx_n,raw_fy_n,raw_fz_n,"
                       "fx_n,fy_n,fz_n,round_trip_us,render_latency_us,stale\n");
   }
   std::signal(SIGINT, OnStopSignal);

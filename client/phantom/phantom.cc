@@ -37,15 +37,29 @@ Eigen::Vector3d SafetyFilter::Update(bool fresh, const Eigen::Vector3d& raw_n, d
     have_fresh_ = true;
     stale_ = false;
   } else if (have_fresh_ && !stale_ && now_s - last_fresh_s_ > parameters_.timeout_s) {
-    // Timeout: ramp from the force rendered now to zero in ramp_s (linear in magnitude).
+    // Timeout: ramp from the force rendered now to zero, linear in time from the moment the
+    // timeout expired (not from this tick, which may come late if the client process
+    // stalled), so the force is zero by last force + timeout + ramp, always.
+    // Never faster than the rate limit: at least |F| / (max_change_per_tick / tick) long.
     stale_ = true;
-    const double ticks = std::max(1.0, parameters_.ramp_s / parameters_.tick_s);
-    ramp_step_n_ = rendered_.norm() / ticks;
+    ramp_start_s_ = last_fresh_s_ + parameters_.timeout_s;
+    ramp_from_n_ = rendered_;
+    const double rate_n_per_s = parameters_.max_change_per_tick_n / parameters_.tick_s;
+    ramp_duration_s_ = std::max(parameters_.ramp_s, rendered_.norm() / rate_n_per_s);
     target_n_.setZero();
   }
-  if (stale_) ++stale_ticks_;
-  double max_step = parameters_.max_change_per_tick_n;
-  if (stale_) max_step = std::min(max_step, std::max(ramp_step_n_, 1e-12));
+  if (stale_) {
+    ++stale_ticks_;
+    const double remaining = 1.0 - (now_s - ramp_start_s_) / ramp_duration_s_;
+    // The ramp only decreases what is rendered (never increases after a reset).
+    if (remaining <= 1e-9) {  // (the end of the ramp, not a rounding residue)
+      rendered_.setZero();
+    } else if (rendered_.norm() > remaining * ramp_from_n_.norm()) {
+      rendered_ = ramp_from_n_ * remaining;
+    }
+    return rendered_;
+  }
+  const double max_step = parameters_.max_change_per_tick_n;
   const Eigen::Vector3d delta = target_n_ - rendered_;
   const double delta_norm = delta.norm();
   if (delta_norm > max_step) {

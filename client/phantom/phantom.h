@@ -24,7 +24,10 @@ struct SafetyParameters {
   // 0 -> 7.9 N in 32 ms, slow enough to avoid a felt "click", fast enough for contact onset.
   double max_change_per_tick_n = 0.25;
   double timeout_s = 0.050;       // no new force for longer than this -> ramp to zero
-  double ramp_s = 0.020;          // duration of that ramp from the force at timeout to zero
+  // Duration of that ramp from the force at timeout to zero, s: linear in time (zero at a
+  // known time even if ticks are missed), and at least |F| / (250 N/s) so it respects the
+  // rate limit (7.9 N -> 31.6 ms).
+  double ramp_s = 0.020;
   double tick_s = 0.001;          // servo period, s
 };
 
@@ -34,7 +37,8 @@ class SafetyFilter {
 
   // One tick at time now_s (monotonic, s). `fresh` = a new force sample arrived this tick
   // with value raw_n (may be NaN/Inf: then it is ignored and counted). Returns the force to
-  // render, N: finite, |F| <= max_force_n, |F - previous| <= max_change_per_tick_n.
+  // render, N: finite, |F| <= max_force_n, |F - previous| <= max_change_per_tick_n (during a
+  // timeout ramp: <= 250 N/s times the time since the previous tick).
   Eigen::Vector3d Update(bool fresh, const Eigen::Vector3d& raw_n, double now_s);
 
   bool stale() const { return stale_; }            // currently in (or after) a timeout ramp
@@ -50,7 +54,8 @@ class SafetyFilter {
   double last_fresh_s_ = 0.0;
   bool have_fresh_ = false;
   bool stale_ = false;
-  double ramp_step_n_ = 0.0;  // per-tick decrease during the timeout ramp
+  double ramp_start_s_ = 0.0, ramp_duration_s_ = 0.0;       // the timeout ramp, s
+  Eigen::Vector3d ramp_from_n_ = Eigen::Vector3d::Zero();  // force when it began, N
   uint64_t rejected_non_finite_ = 0, clamped_ = 0, stale_ticks_ = 0;
 };
 

@@ -108,6 +108,34 @@ TEST(PhantomSafety, TimeoutRampsToZeroThenResumes) {
   EXPECT_NEAR((f - back).norm(), 0.0, 1e-12);
 }
 
+// A stalled client (ticks missed around the timeout) still reaches zero on time: the ramp is
+// linear in time from the moment the timeout expired, and at least |F| / 250 N/s long (the
+// rate limit), so the force is zero by last force + timeout + ramp.
+TEST(PhantomSafety, TimeoutRampIsOnTimeDespiteMissedTicks) {
+  SafetyParameters p;  // timeout 50 ms, ramp 20 ms, 0.25 N per 1 ms tick
+  const double ramp_s = 7.9 / 250.0;  // longer than ramp_s = 20 ms: the rate limit rules
+  for (const double tick_gap_s : {0.007, 0.045}) {  // 6 of 7 ticks missed; a 45 ms stall
+    SafetyFilter filter(p);
+    const Eigen::Vector3d raw(0.0, 7.9, 0.0);
+    double t = 0.0;
+    for (int tick = 0; tick < 40; ++tick, t += p.tick_s) filter.Update(true, raw, t);
+    ASSERT_NEAR(filter.rendered().y(), 7.9, 1e-12);
+    const double last_fresh = t - p.tick_s;
+    const double ramp_start = last_fresh + p.timeout_s;
+    bool saw_ramp = false;
+    for (t = last_fresh + tick_gap_s; t < ramp_start + ramp_s + 0.1; t += tick_gap_s) {
+      const double y = filter.Update(false, raw, t).y();
+      // 7.9 N until the timeout, then the line 7.9 N * (1 - (t - ramp_start) / ramp), then 0.
+      const double expected = t <= ramp_start ? 7.9 : std::max(0.0, 7.9 * (1.0 - (t - ramp_start) / ramp_s));
+      EXPECT_NEAR(y, expected, 1e-9) << "tick gap " << tick_gap_s << " s, t = " << t;
+      saw_ramp = saw_ramp || (y > 0.0 && y < 7.9);
+    }
+    EXPECT_EQ(saw_ramp, tick_gap_s < ramp_s) << tick_gap_s;
+    EXPECT_TRUE(filter.stale());
+    EXPECT_EQ(filter.rendered().norm(), 0.0);
+  }
+}
+
 TEST(PhantomHand, ConvergesToAFixedTarget) {
   HandModel hand({}, Eigen::Vector3d::Zero());
   const Eigen::Vector3d target(0.01, -0.02, 0.005);
