@@ -1,0 +1,41 @@
+#!/bin/sh
+# Entrypoint of the HapCo image (docker/Dockerfile, docs/container.md).
+# - HAPCO_DDS_INTERFACE defaults to the interface of the default route (eth0 on a container
+#   network, the host's uplink with --network host), else lo; docker/cyclonedds.xml reads it.
+# - "IMAGE --flags..." runs hapco-server on $HAPCO_SCENE with those flags.
+# - HAPCO_DOMAIN, if set, becomes --domain for the hapco-* tools (a later --domain wins).
+# - hapco-phantom without --client-id gets HAPCO_CLIENT_ID, else the container's hostname
+#   (unique per compose replica).
+set -eu
+
+if [ -z "${HAPCO_DDS_INTERFACE:-}" ]; then
+  # /proc/net/route: Iface Destination ...; destination 00000000 = the default route.
+  while read -r iface destination _; do
+    if [ "$destination" = "00000000" ]; then HAPCO_DDS_INTERFACE=$iface; break; fi
+  done < /proc/net/route || true
+  export HAPCO_DDS_INTERFACE="${HAPCO_DDS_INTERFACE:-lo}"
+fi
+
+if [ "$#" -eq 0 ] || [ "${1#-}" != "$1" ]; then
+  set -- hapco-server "${HAPCO_SCENE:-/usr/share/hapco/scenes/benchmark1.txtpb}" "$@"
+fi
+
+program=$1
+shift
+case "$program" in
+  hapco-phantom)
+    has_id=no
+    for arg in "$@"; do
+      if [ "$arg" = "--client-id" ]; then has_id=yes; fi
+    done
+    if [ "$has_id" = no ]; then
+      set -- --client-id "${HAPCO_CLIENT_ID:-${HOSTNAME:-$(cat /proc/sys/kernel/hostname)}}" "$@"
+    fi
+    ;;
+esac
+case "$program" in
+  hapco-server | hapco-phantom | hapco-recorder | hapco-status)
+    if [ -n "${HAPCO_DOMAIN:-}" ]; then set -- --domain "$HAPCO_DOMAIN" "$@"; fi
+    ;;
+esac
+exec "$program" "$@"
