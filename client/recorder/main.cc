@@ -229,6 +229,11 @@ class Recorder {
     status->set_duplicates(s.counters.duplicates);
     status->set_unknown_clients(s.counters.unknown_clients);
     status->set_floods(s.counters.floods);
+    status->set_cpu_use(s.cpu_use);
+    status->set_steps(s.steps);
+    status->set_superseded(s.superseded);
+    status->set_contact_frames_dropped(s.contact_frames_dropped);
+    status->set_non_finite_forces(s.non_finite_forces);
     writer_->Append(record_);
     ++status_records_;
   }
@@ -263,6 +268,7 @@ class Recorder {
     Set(step->mutable_device_force_n(), f.device_force_n);
     step->set_solver_status(StatusName(f.solver_status));
     step->set_iterations(f.iterations);
+    step->set_solver_error_m(f.solver_error);
     step->set_separating(f.separating_count);
     step->set_sticking(f.sticking_count);
     step->set_sliding(f.sliding_count);

@@ -41,6 +41,12 @@ Qos& Qos::Volatile() {
   dds_qset_durability(qos_, DDS_DURABILITY_VOLATILE);
   return *this;
 }
+Qos& Qos::HistoricalDepth(int32_t depth) {
+  dds_qset_durability_service(qos_, 0, DDS_HISTORY_KEEP_LAST, depth, DDS_LENGTH_UNLIMITED, DDS_LENGTH_UNLIMITED,
+                              DDS_LENGTH_UNLIMITED);
+  return *this;
+}
+
 Qos& Qos::TransientLocal() {
   dds_qset_durability(qos_, DDS_DURABILITY_TRANSIENT_LOCAL);
   return *this;
@@ -92,7 +98,7 @@ Qos ForceQos() { return StreamQos(); }
 
 Qos ContactStateQos(int32_t depth) {
   Qos q;
-  q.Reliable(0).KeepLast(depth).TransientLocal().LatencyBudget(0);
+  q.Reliable(0).KeepLast(depth).TransientLocal().HistoricalDepth(depth).LatencyBudget(0);
   return q;
 }
 

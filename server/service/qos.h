@@ -35,6 +35,9 @@ class Qos {
   Qos& KeepLast(int32_t depth);
   Qos& Volatile();
   Qos& TransientLocal();
+  // How many samples per instance a transient-local writer keeps for late-joining readers.
+  // Cyclone takes this from the durability-service QoS (default 1), not from the history.
+  Qos& HistoricalDepth(int32_t depth);
   Qos& LatencyBudget(dds_duration_t budget_ns);
   Qos& Partition(std::string_view name);  // for publishers and subscribers
 
@@ -83,6 +86,7 @@ inline constexpr int32_t kContactStateDepth = 8;
 // can be written before a recorder has discovered that writer. The writer keeps its newest
 // `depth` frames for late-joining readers, so those first frames still reach the recorder
 // (measured loss of a session's first frame under load before this; costs only memory).
+// The historical depth is set explicitly: Cyclone keeps only 1 by default (durability service).
 Qos ContactStateQos(int32_t depth = kContactStateDepth);
 
 // ServerStatus (server -> anyone, ~1 Hz): reliable (max_blocking_time 0, same reason as

@@ -143,7 +143,15 @@ int Run(int argc, char** argv) {
       worst_p99_s = std::max(worst_p99_s, status->step_time_p99_s());
       worst_max_s = std::max(worst_max_s, status->step_time_max_s());
     }
-    std::printf("status     worst status period: step p99 %.1f us, max %.1f us\n", 1e6 * worst_p99_s, 1e6 * worst_max_s);
+    double peak_cpu = 0;
+    for (const auto* status : statuses) peak_cpu = std::max(peak_cpu, status->cpu_use());
+    std::printf("status     worst status period: step p99 %.1f us, max %.1f us; server CPU peak %.0f %% of a core\n",
+                1e6 * worst_p99_s, 1e6 * worst_max_s, 100.0 * peak_cpu);
+    std::printf("server     %llu steps, superseded poses %llu, contact frames dropped %llu, non-finite forces %llu "
+                "(last status)\n",
+                static_cast<unsigned long long>(s.steps()), static_cast<unsigned long long>(s.superseded()),
+                static_cast<unsigned long long>(s.contact_frames_dropped()),
+                static_cast<unsigned long long>(s.non_finite_forces()));
     std::printf("bad input  nan %llu, workspace %llu, jumps %llu, out-of-order %llu, duplicates %llu, "
                 "unknown clients %llu, floods %llu (server counters, last status)\n",
                 static_cast<unsigned long long>(s.bad_pose_nan()), static_cast<unsigned long long>(s.out_of_workspace()),
