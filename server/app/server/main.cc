@@ -31,8 +31,10 @@ constexpr const char* kUsage = R"(usage: hapco-server SCENE.txtpb [options]
 Serves haptic sessions over DDS: every client publishes DevicePose samples ("hapco/pose",
 1 kHz); the server runs one contact step per pose on the client's own session of SCENE and
 answers with a FeedbackForce on partition hapco/client/<id> (docs/dds-qos.md). A session
-opens on a SESSION_JOIN or on the client's first valid pose. Bad input is counted and logged
-(at most one line per second per kind), never fatal.
+opens on a SESSION_JOIN or on the client's first valid pose (so clients resume by themselves
+after a server restart); after a SESSION_LEAVE the client must join again. Bad input is
+counted and logged (at most one line per second per kind), never fatal.
+Guide: docs/haptic-service.md.
 
   --domain N          DDS domain id (default 0); the configuration comes from CYCLONEDDS_URI
                       (loopback: CYCLONEDDS_URI=file://.../docker/cyclonedds-loopback.xml)
