@@ -23,6 +23,7 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
+import matplotlib.ticker  # noqa: E402
 
 plt.rcParams.update({"figure.dpi": 90, "font.size": 9})
 
@@ -54,9 +55,9 @@ def roundtrips(path):
     return by_client
 
 
-def save(fig, path):
+def save(fig, path, dpi=None):
     fig.tight_layout()
-    fig.savefig(path)
+    fig.savefig(path, dpi=dpi)
     plt.close(fig)
     print("wrote", path)
 
@@ -126,7 +127,8 @@ def plot_capacity(args):
     ax.axhline(1.0, color="r", lw=0.8, label="1 % limit")
     ax.set_xlabel("clients N")
     ax.set_ylabel("% of ticks")
-    ax.set_yscale("symlog", linthresh=1)
+    ax.set_ylim(bottom=0)
+    ax.xaxis.set_major_locator(matplotlib.ticker.MaxNLocator(integer=True))
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=7)
     save(fig, args.out + "-missed.png")
@@ -203,7 +205,34 @@ def plot_network(args):
             if ticks:
                 force_panel(ax, None, ticks[0], 0.0, 1.3, title="%s (%s)" % (case, os.path.basename(ticks[0])))
         axes[-1].set_xlabel("time since the client started, s")
-        save(fig, args.out + "-traces.png")
+        save(fig, args.out + "-traces.png", dpi=70)
+
+    # Hand mode: the device moves under the rendered force, so delay can drive it.
+    cases = [c for c in ("d0_j0_l0_hand", "d1_j0_l0_hand", "d5_j0_l0_hand")
+             if os.path.isdir(os.path.join(args.runs_dir, c))]
+    if cases:
+        fig, axes = plt.subplots(len(cases), 1, figsize=(7, 2.2 * len(cases)), sharex=True)
+        if len(cases) == 1:
+            axes = [axes]
+        for ax, case in zip(axes, cases):
+            ticks = sorted(glob.glob(os.path.join(args.runs_dir, case, "ticks-*.csv")))
+            if not ticks:
+                continue
+            rows = [r for r in read_csv(ticks[0]) if num(r, "time_s") <= 1.3]
+            t = [num(r, "time_s") for r in rows]
+            ax.plot(t, [num(r, "server_fz_n") for r in rows], color="C0", lw=2.5, alpha=0.35, label="server Fz")
+            ax.plot(t, [num(r, "fz_n") for r in rows], color="C0", lw=0.9, label="rendered Fz")
+            ax.set_ylabel("force, N")
+            ax2 = ax.twinx()
+            ax2.plot(t, [num(r, "z_m") * 1000 for r in rows], color="k", lw=0.8, label="device z")
+            ax2.set_ylabel("z, mm")
+            e = [num(r, "energy_j") for r in rows]
+            ax.set_title("%s: passivity E at 1.3 s = %.3f J" % (case, e[-1] if e else math.nan), fontsize=8)
+            h1, l1 = ax.get_legend_handles_labels()
+            h2, l2 = ax2.get_legend_handles_labels()
+            ax.legend(h1 + h2, l1 + l2, fontsize=7, loc="upper right")
+        axes[-1].set_xlabel("time since the client started, s")
+        save(fig, args.out + "-traces-hand.png", dpi=70)
 
 
 def main():
