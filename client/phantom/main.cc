@@ -18,6 +18,7 @@
 #include "common/error.h"
 #include "common/realtime.h"
 #include "io/scene_file.h"
+#include "io/trajectory_file.h"
 #include "phantom.h"
 #include "phantom_client.h"
 #include "service/dds.h"
@@ -114,7 +115,7 @@ Options Parse(int argc, char** argv) {
 
 // Trajectory points 0..N (point 0 = start), m.
 std::vector<Eigen::Vector3d> LoadTrajectory(const Options& o, const hapco::sim::SceneSpec& scene) {
-  if (o.trajectory != "scene") return hapco::phantom::LoadTrajectoryCsv(o.trajectory);
+  if (o.trajectory != "scene") return hapco::io::LoadTrajectoryCsv(o.trajectory);
   std::vector<Eigen::Vector3d> points;
   for (int k = 0; k <= scene.total_steps(); ++k) points.push_back(scene.DeviceTranslationAtStep(k));
   return points;

@@ -5,8 +5,6 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
-#include <fstream>
-#include <sstream>
 
 #include "common/error.h"
 #include "common/realtime.h"
@@ -250,30 +248,6 @@ void PhantomClient::Run(const std::atomic<bool>& stop, const std::function<void(
   stats_.rejected_non_finite = safety.rejected_non_finite();
   stats_.clamped = safety.clamped();
   stats_.arrivals_overflowed = arrivals_overflowed_.load();
-}
-
-std::vector<Eigen::Vector3d> LoadTrajectoryCsv(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) throw InputError("cannot read trajectory " + path);
-  std::vector<Eigen::Vector3d> points{Eigen::Vector3d::Zero()};
-  std::string line;
-  int number = 0;
-  while (std::getline(in, line)) {
-    ++number;
-    if (line.empty()) continue;
-    for (char& c : line) {
-      if (c == ',') c = ' ';
-    }
-    std::istringstream fields(line);
-    Eigen::Vector3d p;
-    if (!(fields >> p.x() >> p.y() >> p.z()) || !p.allFinite()) {
-      if (number == 1) continue;  // header
-      throw InputError(path + ":" + std::to_string(number) + ": expected x_m,y_m,z_m");
-    }
-    points.push_back(p);
-  }
-  if (points.size() < 2) throw InputError(path + ": no trajectory rows");
-  return points;
 }
 
 }  // namespace hapco::phantom

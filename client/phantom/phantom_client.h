@@ -128,8 +128,4 @@ class PhantomClient {
   std::unique_ptr<Dds> dds_;
 };
 
-// A trajectory CSV: rows x_m,y_m,z_m (a header line is skipped), one per tick; point 0 is the
-// origin. Throws InputError with FILE:LINE for a malformed row.
-std::vector<Eigen::Vector3d> LoadTrajectoryCsv(const std::string& path);
-
 }  // namespace hapco::phantom

@@ -15,6 +15,7 @@
 #include "common/error.h"
 #include "common/timer.h"
 #include "io/scene_file.h"
+#include "io/trajectory_file.h"
 #include "io/recording.h"
 #include "io/vtk_export.h"
 #include "sim/step_pipeline.h"
@@ -36,6 +37,8 @@ detection, flexibility operator, frictional contact solve, force on the device.
   --mode MODE       precomputed (default; per-scene compliance, O(contacts) per step) or
                     full (the paper's per-step sparse solves; slow, the reference)
   --steps N         stop after N steps (default: the whole trajectory)
+  --trajectory FILE step k moves the tool to row k of FILE (CSV x_m,y_m,z_m, a header line
+                    is skipped) instead of the scene's phases; e.g. the poses a server stepped
   --csv FILE        one row per step (see the header line for columns and units)
   --vtk DIR         write ParaView files to DIR: deformed bodies and contact points every
                     --vtk-every steps (default 10) and at the last step; open DIR/hapco.pvd
@@ -49,7 +52,7 @@ Exit code: 0 when every step converged, 2 when some did not (the run completes),
 )";
 
 struct Options {
-  std::string scene_path, csv_path, vtk_dir, record_path, solver_name, mode = "precomputed";
+  std::string scene_path, csv_path, vtk_dir, record_path, solver_name, mode = "precomputed", trajectory_path;
   double tolerance_m = 0, friction = -1, rho_scale = 1;
   int max_iterations = 0, steps = 0, vtk_every = 10;
   bool cold = false, quiet = false;
@@ -86,6 +89,8 @@ Options Parse(int argc, char** argv) {
       if (options.mode != "precomputed" && options.mode != "full") {
         throw hapco::InputError("--mode must be precomputed or full, got '" + options.mode + "'");
       }
+    } else if (arg == "--trajectory") {
+      options.trajectory_path = value();
     } else if (arg == "--steps") {
       options.steps = static_cast<int>(hapco::cli::ParseInteger("--steps", value(), 1, 100000000));
     } else if (arg == "--csv") {
@@ -234,20 +239,30 @@ int Run(const Options& options) {
     if (error) throw hapco::InputError("cannot create VTK directory " + options.vtk_dir + ": " + error.message());
     collection = std::make_unique<hapco::io::VtkCollection>(options.vtk_dir + "/hapco.pvd");
   }
-  const int steps = options.steps > 0 ? std::min(options.steps, scene.total_steps()) : scene.total_steps();
+  // The tool's translation per step: the scene's phases, or a file's rows (phase "file").
+  std::vector<Eigen::Vector3d> file_points;
+  if (!options.trajectory_path.empty()) file_points = hapco::io::LoadTrajectoryCsv(options.trajectory_path);
+  const int trajectory_steps = file_points.empty() ? scene.total_steps() : static_cast<int>(file_points.size()) - 1;
+  auto translation_at = [&](int step) {
+    return file_points.empty() ? scene.DeviceTranslationAtStep(step) : file_points[static_cast<std::size_t>(step)];
+  };
+  auto phase_name = [&](int phase) -> std::string {
+    return file_points.empty() ? scene.trajectory[static_cast<std::size_t>(phase)].name : "file";
+  };
+  const int steps = options.steps > 0 ? std::min(options.steps, trajectory_steps) : trajectory_steps;
   int not_converged = 0;
   double peak_force_n = 0;
   long total_iterations = 0;
   hapco::Stopwatch run;
   for (int step = 1; step <= steps; ++step) {
-    const auto& out = session.Step(scene.DeviceTranslationAtStep(step));
-    const int phase = scene.PhaseOfStep(step);
+    const auto& out = session.Step(translation_at(step));
+    const int phase = file_points.empty() ? scene.PhaseOfStep(step) : 0;
     if (out.status != hapco::contact::SolverStatus::kConverged) ++not_converged;
     peak_force_n = std::max(peak_force_n, out.contact_force_n.norm());
     total_iterations += out.iterations;
     if (csv != nullptr) {
       std::fprintf(csv, "%d,%s,%.9g,%.9g,%.9g,%.12g,%.12g,%.12g,%.12g,%.12g,%.12g,%d,%d,%d,%d,%d,%d,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%s\n",
-                   step, scene.trajectory[static_cast<std::size_t>(phase)].name.c_str(),
+                   step, phase_name(phase).c_str(),
                    out.device_translation_m.x(), out.device_translation_m.y(), out.device_translation_m.z(),
                    out.contact_force_n.x(), out.contact_force_n.y(), out.contact_force_n.z(),
                    out.device_force_n.x(), out.device_force_n.y(), out.device_force_n.z(),
@@ -263,7 +278,7 @@ int Run(const Options& options) {
     }
     if (progress && (step % 10 == 0 || step == steps)) {
       std::fprintf(stderr, "\rstep %d/%d  phase %-8s  |F| %7.3f N  contacts %3d  iterations %4d",
-                   step, steps, scene.trajectory[static_cast<std::size_t>(phase)].name.c_str(),
+                   step, steps, phase_name(phase).c_str(),
                    out.contact_force_n.norm(), out.num_contacts, out.iterations);
     }
   }
