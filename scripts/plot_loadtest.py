@@ -8,6 +8,8 @@
       PREFIX-roundtrip.png (p50/p99/p99.9 vs N), PREFIX-missed.png (missed % vs N),
       PREFIX-server.png (server step time and CPU vs N), PREFIX-cdf.png (round trip CDF per N,
       from DIR/n<N>/roundtrip.csv)
+  plot_loadtest.py table --capacity CAPACITY.csv | --network NETWORK.csv
+      the markdown tables of docs/load-and-network.md, from the CSVs
   plot_loadtest.py network --csv NETWORK.csv --runs-dir DIR --out PREFIX
       PREFIX-delay.png (stability vs delay), PREFIX-loss.png (stability vs loss),
       PREFIX-traces.png (force traces at 0 / 5 / 20 ms, from DIR/<case>/ticks-*.csv)
@@ -208,7 +210,7 @@ def plot_network(args):
         save(fig, args.out + "-traces.png", dpi=70)
 
     # Hand mode: the device moves under the rendered force, so delay can drive it.
-    cases = [c for c in ("d0_j0_l0_hand", "d1_j0_l0_hand", "d5_j0_l0_hand")
+    cases = [c for c in ("d0_j0_l0_hand", "d1_j0_l0_hand", "d2_j0_l0_hand", "d5_j0_l0_hand")
              if os.path.isdir(os.path.join(args.runs_dir, c))]
     if cases:
         fig, axes = plt.subplots(len(cases), 1, figsize=(7, 2.2 * len(cases)), sharex=True)
@@ -235,6 +237,38 @@ def plot_network(args):
         save(fig, args.out + "-traces-hand.png", dpi=70)
 
 
+def table(args):
+    if args.capacity:
+        print("| N | lost | servo missed | round trip p50 / p99 / p99.9 | server step p50 / p99 | server CPU | timeouts |")
+        print("|---|---|---|---|---|---|---|")
+        for r in read_csv(args.capacity):
+            print("| %d | %.2f %% | %.2f %% | %.2f / %.2f / %.1f ms | %.0f / %.0f µs | %.2f | %d |" % (
+                num(r, "clients"), num(r, "lost_pct"), num(r, "missed_pct"), num(r, "rt_p50_us") / 1000,
+                num(r, "rt_p99_us") / 1000, num(r, "rt_p999_us") / 1000, num(r, "server_step_p50_us"),
+                num(r, "server_step_p99_us"), num(r, "server_cpu"), num(r, "server_losses")))
+    if args.network:
+        rows = read_csv(args.network)
+        cases = []
+        for r in rows:
+            key = (r["delay_ms"], r["jitter_ms"], r["loss_pct"])
+            if key not in cases:
+                cases.append(key)
+        print("| one-way delay / jitter / loss | round trip p50 | lost (kin / hand) | servo missed (kin / hand) | "
+              "tracking rms (kin / hand) | HF ratio (kin / hand) | passivity min E (kin / hand) | timeouts (kin / hand) |")
+        print("|---|---|---|---|---|---|---|---|")
+        for key in cases:
+            k = next((r for r in rows if (r["delay_ms"], r["jitter_ms"], r["loss_pct"]) == key and r["mode"] == "kinematic"), None)
+            h = next((r for r in rows if (r["delay_ms"], r["jitter_ms"], r["loss_pct"]) == key and r["mode"] == "hand"), None)
+
+            def pair(fmt, col):
+                return " / ".join(fmt % num(x, col) if x else "-" for x in (k, h))
+            first = k or h
+            print("| %s / %s / %s | %.2f ms | %s | %s | %s | %s | %s | %s |" % (
+                key[0], key[1], key[2], num(first, "rt_p50_us") / 1000, pair("%.1f %%", "lost_pct"),
+                pair("%.2f %%", "missed_pct"), pair("%.2f N", "tracking_rms_n"), pair("%.2f", "hf_ratio"),
+                pair("%.3g J", "passivity_min_j"), pair("%d", "server_losses")))
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = p.add_subparsers(dest="what", required=True)
@@ -248,8 +282,11 @@ def main():
     n.add_argument("--csv", required=True)
     n.add_argument("--runs-dir", required=True)
     n.add_argument("--out", required=True)
+    t = sub.add_parser("table")
+    t.add_argument("--capacity")
+    t.add_argument("--network")
     args = p.parse_args()
-    {"run": plot_run, "capacity": plot_capacity, "network": plot_network}[args.what](args)
+    {"run": plot_run, "capacity": plot_capacity, "network": plot_network, "table": table}[args.what](args)
 
 
 if __name__ == "__main__":
