@@ -15,7 +15,9 @@ target_include_directories(hapco_cholmod SYSTEM INTERFACE ${CHOLMOD_INCLUDE_DIR}
 target_link_libraries(hapco_cholmod INTERFACE ${CHOLMOD_LIBRARY} ${SUITESPARSECONFIG_LIBRARY})
 
 # FCLIB (HDF5 frictional-contact problem files), pkg-config name `fclib`.
-pkg_check_modules(FCLIB REQUIRED IMPORTED_TARGET fclib)
+if(HAPCO_WITH_FCLIB)
+  pkg_check_modules(FCLIB REQUIRED IMPORTED_TARGET fclib)
+endif()
 
 # Siconos Numerics is optional: only the contact benchmark compares against it.
 find_path(SICONOS_NUMERICS_INCLUDE_DIR FrictionContactProblem.h PATH_SUFFIXES siconos/numerics)
