@@ -99,7 +99,8 @@ bool PhantomClient::Connect(std::string* why) {
   if (!dds_->force_reader.WaitForWriters(1, timeout_ns)) {
     if (why != nullptr) {
       *why = "the server did not open a session for '" + config_.client_id + "' within " +
-             std::to_string(config_.connect_timeout_s) + " s (server full? see its log)";
+             std::to_string(config_.connect_timeout_s) + " s (server full, or it does not serve scene '" +
+             config_.scene_name + "'? see its log)";
     }
     return false;
   }

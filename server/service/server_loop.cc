@@ -66,9 +66,9 @@ double Percentile(std::vector<double>* values, double p) {
 
 }  // namespace
 
-ServerLoop::ServerLoop(const sim::TwoBodyModel& model, dds_domainid_t domain_id,
+ServerLoop::ServerLoop(std::vector<const sim::TwoBodyModel*> models, dds_domainid_t domain_id,
                        const ServerOptions& options)
-    : model_(model),
+    : models_(std::move(models)),
       options_(options),
       participant_(domain_id),
       pose_topic_(participant_),
@@ -86,6 +86,16 @@ ServerLoop::ServerLoop(const sim::TwoBodyModel& model, dds_domainid_t domain_id,
       waitset_(participant_),
       last_log_ns_(kLogKinds, 0),
       suppressed_logs_(kLogKinds, 0) {
+  if (models_.empty()) throw InputError("the server needs at least one scene");
+  for (std::size_t i = 0; i < models_.size(); ++i) {
+    HAPCO_ASSERT(models_[i] != nullptr, "ServerLoop: null model");
+    for (std::size_t j = 0; j < i; ++j) {
+      if (models_[j]->scene().name == models_[i]->scene().name) {
+        throw InputError("two scenes are named '" + models_[i]->scene().name +
+                         "': clients choose a scene by its name, so names must differ");
+      }
+    }
+  }
   if (options_.status_period_s <= 0) throw InputError("status period must be > 0 s");
   if (options_.max_sessions < 1) throw InputError("max sessions must be >= 1");
   waitset_.Attach(pose_reader_.data_condition(), kPoseToken);
@@ -124,7 +134,21 @@ void ServerLoop::Run() {
   PublishStatus(MonotonicNowNs());
 }
 
-ServerLoop::Client* ServerLoop::OpenSession(const std::string& client_id) {
+const sim::TwoBodyModel* ServerLoop::FindModel(const std::string& scene_name) const {
+  if (scene_name.empty()) return models_.front();
+  for (const sim::TwoBodyModel* model : models_) {
+    if (model->scene().name == scene_name) return model;
+  }
+  return nullptr;
+}
+
+std::string ServerLoop::SceneNames() const {
+  std::string names;
+  for (const sim::TwoBodyModel* model : models_) names += (names.empty() ? "" : ", ") + model->scene().name;
+  return names;
+}
+
+ServerLoop::Client* ServerLoop::OpenSession(const std::string& client_id, const sim::TwoBodyModel& model) {
   if (static_cast<int>(sessions_.size()) >= options_.max_sessions) {
     ++counters_.refused_sessions;
     ++counters_.input.unknown_clients;
@@ -134,17 +158,31 @@ ServerLoop::Client* ServerLoop::OpenSession(const std::string& client_id) {
   }
   try {
     Client client;
-    client.session = std::make_unique<Session>(client_id, model_, participant_, force_topic_, contact_topic_,
+    client.model = &model;
+    client.session = std::make_unique<Session>(client_id, model, participant_, force_topic_, contact_topic_,
                                                options_.time_budget_s);
     auto [it, inserted] = sessions_.emplace(client_id, std::move(client));
     HAPCO_ASSERT(inserted, "OpenSession: session exists already");
     ++counters_.sessions_opened;
-    Log(kLogSession, "session opened for '" + client_id + "' (" + std::to_string(sessions_.size()) + " open)");
+    Log(kLogSession, "session opened for '" + client_id + "' on scene " + model.scene().name + " (" +
+                         std::to_string(sessions_.size()) + " open)");
     return &it->second;
   } catch (const std::exception& error) {
     Log(kLogFailure, "cannot open a session for '" + client_id + "': " + error.what());
     return nullptr;
   }
+}
+
+void ServerLoop::CloseSession(std::map<std::string, Client>::iterator it) {
+  const SessionCounters& c = it->second.session->counters();
+  closed_session_counters_.steps += c.steps;
+  closed_session_counters_.non_finite_forces += c.non_finite_forces;
+  closed_session_counters_.force_write_errors += c.force_write_errors;
+  closed_session_counters_.contact_frames_dropped += c.contact_frames_dropped;
+  closed_session_counters_.sequence_gaps += c.sequence_gaps;
+  Log(kLogSession, "session closed for '" + it->first + "'");
+  sessions_.erase(it);
+  ++counters_.sessions_closed;
 }
 
 void ServerLoop::ProcessSessionControls() {
@@ -159,10 +197,23 @@ void ServerLoop::ProcessSessionControls() {
     }
     auto it = sessions_.find(id);
     switch (control.command) {
-      case hapco_idl_SESSION_JOIN:
+      case hapco_idl_SESSION_JOIN: {
         left_clients_.erase(id);
+        const std::string scene_name(control.scene_name, strnlen(control.scene_name, sizeof(control.scene_name)));
+        const sim::TwoBodyModel* model = FindModel(scene_name);
+        if (model == nullptr) {
+          ++counters_.refused_sessions;
+          Log(kLogClient, "session refused for '" + id + "': unknown scene '" + scene_name +
+                              "' (this server has: " + SceneNames() + ")");
+          if (it != sessions_.end()) CloseSession(it);
+          break;
+        }
+        if (it != sessions_.end() && it->second.model != model) {
+          CloseSession(it);  // the client switches scene: a new session on the new one
+          it = sessions_.end();
+        }
         if (it == sessions_.end()) {
-          OpenSession(id);
+          OpenSession(id, *model);
         } else {
           // A restarted client (its sequence starts again): a fresh stream and scene state.
           it->second.session->Reset();
@@ -170,21 +221,14 @@ void ServerLoop::ProcessSessionControls() {
           Log(kLogSession, "session of '" + id + "' joined again: reset");
         }
         break;
+      }
       case hapco_idl_SESSION_LEAVE:
         if (it != sessions_.end()) {
-          const SessionCounters& c = it->second.session->counters();
-          closed_session_counters_.steps += c.steps;
-          closed_session_counters_.non_finite_forces += c.non_finite_forces;
-          closed_session_counters_.force_write_errors += c.force_write_errors;
-          closed_session_counters_.contact_frames_dropped += c.contact_frames_dropped;
-          closed_session_counters_.sequence_gaps += c.sequence_gaps;
-          sessions_.erase(it);
+          CloseSession(it);
           // Poses of this client still in flight must not reopen the session: it has to
           // SESSION_JOIN again (a restarted server, which has no such record, still opens a
           // session on a client's first pose, so clients resume after a server restart).
           left_clients_.insert(id);
-          ++counters_.sessions_closed;
-          Log(kLogSession, "session closed for '" + id + "'");
         }
         break;
       case hapco_idl_SESSION_RESET:
@@ -237,7 +281,7 @@ void ServerLoop::ProcessPoses() {
         Count(first, id);
         continue;
       }
-      client = OpenSession(id);
+      client = OpenSession(id, *models_.front());
       if (client == nullptr) continue;
     } else {
       client = &it->second;

@@ -56,7 +56,11 @@ class ServerLoop {
  public:
   // Creates the participant, topics, pose/session readers and the status writer in
   // `domain_id` (configuration from CYCLONEDDS_URI). Throws DdsError on setup failure.
-  ServerLoop(const sim::TwoBodyModel& model, dds_domainid_t domain_id, const ServerOptions& options);
+  // `models`: the scenes served (not owned, non-empty, distinct scene names); a SESSION_JOIN
+  // picks one by its scene_name, an empty name or a session opened by a pose gets the first.
+  ServerLoop(std::vector<const sim::TwoBodyModel*> models, dds_domainid_t domain_id, const ServerOptions& options);
+  ServerLoop(const sim::TwoBodyModel& model, dds_domainid_t domain_id, const ServerOptions& options)
+      : ServerLoop(std::vector<const sim::TwoBodyModel*>{&model}, domain_id, options) {}
   ~ServerLoop();
   ServerLoop(const ServerLoop&) = delete;
   ServerLoop& operator=(const ServerLoop&) = delete;
@@ -73,6 +77,7 @@ class ServerLoop {
 
  private:
   struct Client {
+    const sim::TwoBodyModel* model = nullptr;  // the scene of this session
     std::unique_ptr<Session> session;
     hapco_idl_DevicePose pending{};
     int64_t pending_receive_ns = 0;
@@ -81,11 +86,15 @@ class ServerLoop {
   void ProcessSessionControls();
   void ProcessPoses();
   void PublishStatus(int64_t now_ns);
-  Client* OpenSession(const std::string& client_id);
+  Client* OpenSession(const std::string& client_id, const sim::TwoBodyModel& model);
+  // The served scene called `scene_name` (the first one for ""), nullptr if none.
+  void CloseSession(std::map<std::string, Client>::iterator it);  // counters kept, logged
+  const sim::TwoBodyModel* FindModel(const std::string& scene_name) const;
+  std::string SceneNames() const;  // "a, b" for messages
   void Count(PoseVerdict verdict, const std::string& client_id);
   void Log(int kind, const std::string& message);
 
-  const sim::TwoBodyModel& model_;
+  std::vector<const sim::TwoBodyModel*> models_;
   ServerOptions options_;
   // Declared first so it is destroyed last (wrappers: children before the participant).
   Participant participant_;

@@ -1,6 +1,6 @@
-// hapco-server: the haptic service. Loads one scene (the TwoBodyModel is shared), serves any
-// number of clients over DDS (one TwoBodySession each), one step per pose. Thin: the work is
-// in hapco::service::ServerLoop and Session.
+// hapco-server: the haptic service. Loads one or more scenes (each TwoBodyModel is shared by
+// its sessions), serves any number of clients over DDS (one TwoBodySession each), one step
+// per pose. Thin: the work is in hapco::service::ServerLoop and Session.
 #include <pthread.h>
 #include <sched.h>
 #include <signal.h>
@@ -10,6 +10,8 @@
 
 #include <cmath>
 #include <cstdio>
+#include <memory>
+#include <vector>
 #include <cstdlib>
 #include <cstring>
 #include <memory>
@@ -26,14 +28,17 @@
 
 namespace {
 
-constexpr const char* kUsage = R"(usage: hapco-server SCENE.txtpb [options]
+constexpr const char* kUsage = R"(usage: hapco-server SCENE.txtpb [SCENE.txtpb ...] [options]
 
 Serves haptic sessions over DDS: every client publishes DevicePose samples ("hapco/pose",
 1 kHz); the server runs one contact step per pose on the client's own session of SCENE and
 answers with a FeedbackForce on partition hapco/client/<id> (docs/dds-qos.md). A session
 opens on a SESSION_JOIN or on the client's first valid pose (so clients resume by themselves
-after a server restart); after a SESSION_LEAVE the client must join again. Bad input is
-counted and logged (at most one line per second per kind), never fatal.
+after a server restart); after a SESSION_LEAVE the client must join again.
+Several scenes: a SESSION_JOIN names its scene (the scene file's `name`; hapco-phantom sends
+the name in the scene file it was given); a session opened by a pose, or a JOIN without a
+name, gets the first scene; an unknown name is refused and logged with the served names.
+Bad input is counted and logged (at most one line per second per kind), never fatal.
 Guide: docs/haptic-service.md.
 
   --domain N          DDS domain id (default 0); the configuration comes from CYCLONEDDS_URI
@@ -58,7 +63,8 @@ Exit code: 0 after a clean shutdown, 1 on bad input (scene file, flags), 3 on a 
 )";
 
 struct Options {
-  std::string scene_path, trace_path;
+  std::vector<std::string> scene_paths;  // the first is the default scene
+  std::string trace_path;
   int domain = 0;
   int rt_priority = 0;
   hapco::service::ServerOptions server;
@@ -97,13 +103,11 @@ Options Parse(int argc, char** argv) {
       options.server.log = false;
     } else if (!arg.empty() && arg[0] == '-') {
       throw hapco::InputError("unknown option " + arg + " (see --help)");
-    } else if (options.scene_path.empty()) {
-      options.scene_path = arg;
     } else {
-      throw hapco::InputError("only one scene file is accepted (see --help)");
+      options.scene_paths.push_back(arg);
     }
   }
-  if (options.scene_path.empty()) throw hapco::InputError("missing SCENE argument (see --help)");
+  if (options.scene_paths.empty()) throw hapco::InputError("missing SCENE argument (see --help)");
   return options;
 }
 
@@ -128,8 +132,16 @@ int Run(const Options& options) {
   sigaction(SIGTERM, &action, nullptr);
 
   hapco::Stopwatch setup;
-  const hapco::sim::SceneSpec scene = hapco::io::LoadSceneFile(options.scene_path);
-  const hapco::sim::TwoBodyModel model(scene);
+  // Every scene's precomputation (factorisations, compliance) once, before serving.
+  std::vector<std::unique_ptr<hapco::sim::TwoBodyModel>> models;
+  std::vector<const hapco::sim::TwoBodyModel*> served;
+  std::string scenes_line;
+  for (const std::string& path : options.scene_paths) {
+    models.push_back(std::make_unique<hapco::sim::TwoBodyModel>(hapco::io::LoadSceneFile(path)));
+    served.push_back(models.back().get());
+    scenes_line += (scenes_line.empty() ? "" : ", ") + models.back()->scene().name + " (" +
+                   std::to_string(models.back()->tool_candidates().size()) + " tool candidate nodes)";
+  }
   hapco::service::ServerOptions server_options = options.server;
   std::unique_ptr<std::FILE, int (*)(std::FILE*)> trace(nullptr, &std::fclose);
   if (!options.trace_path.empty()) {
@@ -139,9 +151,9 @@ int Run(const Options& options) {
     server_options.trace = trace.get();
   }
   hapco::UseRealtimePriority(options.rt_priority, "hapco-server");
-  hapco::service::ServerLoop server(model, options.domain, server_options);
-  std::printf("hapco-server: scene %s (%zu tool candidate nodes), domain %d, ready in %.2f s\n",
-              scene.name.c_str(), model.tool_candidates().size(), options.domain, setup.ElapsedSeconds());
+  hapco::service::ServerLoop server(served, options.domain, server_options);
+  std::printf("hapco-server: scene%s %s, domain %d, ready in %.2f s\n", served.size() > 1 ? "s" : "",
+              scenes_line.c_str(), options.domain, setup.ElapsedSeconds());
   std::fflush(stdout);
 
   int received = 0;

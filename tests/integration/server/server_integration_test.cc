@@ -260,5 +260,69 @@ TEST(ServerProcess, BadPosesAndInvalidClientIdAreCountedAndTheServerStaysUp) {
   EXPECT_EQ(out.find("nan 0,"), std::string::npos) << out;
 }
 
+// One server, two scenes: each client gets the scene its SESSION_JOIN names, every force
+// equals an offline replay of that client's stepped poses on that scene, and a client naming a
+// scene the server does not have is refused with the served names in the log.
+TEST(ServerProcess, TwoScenesServeEachClientTheSceneItNames) {
+  const std::string dir = TestDir();
+  const std::string domain = std::to_string(SetUpTestDomain());
+  const std::string frictionless = std::string(HAPCO_SOURCE_DIR) + "/tests/data/scenes/coarse_frictionless.txtpb";
+  const std::string unknown = std::string(HAPCO_SOURCE_DIR) + "/proto/scenes/benchmark2.txtpb";
+  Process server({HAPCO_SERVER_EXE, kScene, frictionless, "--domain", domain, "--trace", dir + "/trace.csv"},
+                 dir + "/server.out", dir + "/server.err");
+  {
+    Process with_friction({HAPCO_PHANTOM_EXE, kScene, "--client-id", "friction", "--domain", domain,
+                           "--connect-timeout-s", "60"},
+                          dir + "/friction.out", dir + "/friction.err");
+    Process without({HAPCO_PHANTOM_EXE, frictionless, "--client-id", "frictionless", "--domain", domain,
+                     "--connect-timeout-s", "60"},
+                    dir + "/frictionless.out", dir + "/frictionless.err");
+    Process stranger({HAPCO_PHANTOM_EXE, unknown, "--client-id", "stranger", "--domain", domain,
+                      "--connect-timeout-s", "5"},
+                     dir + "/stranger.out", dir + "/stranger.err");
+    ASSERT_EQ(with_friction.Wait(120'000), 0) << ReadFile(dir + "/friction.err");
+    ASSERT_EQ(without.Wait(120'000), 0) << ReadFile(dir + "/frictionless.err");
+    EXPECT_EQ(stranger.Wait(120'000), 2);
+    EXPECT_NE(ReadFile(dir + "/stranger.err").find("does not serve scene 'benchmark2'"), std::string::npos)
+        << ReadFile(dir + "/stranger.err");
+  }
+  server.Signal(SIGTERM);
+  ASSERT_EQ(server.Wait(30'000), 0) << ReadFile(dir + "/server.err");
+  EXPECT_NE(ReadFile(dir + "/server.out").find("scenes coarse (25 tool candidate nodes), coarse-frictionless"),
+            std::string::npos)
+      << ReadFile(dir + "/server.out");
+  EXPECT_NE(ReadFile(dir + "/server.err")
+                .find("session refused for 'stranger': unknown scene 'benchmark2' (this server has: coarse, "
+                      "coarse-frictionless)"),
+            std::string::npos)
+      << ReadFile(dir + "/server.err");
+
+  // Each client's stepped poses replayed offline on the scene it named.
+  const sim::TwoBodyModel friction_model(io::LoadSceneFile(kScene));
+  const sim::TwoBodyModel frictionless_model(io::LoadSceneFile(frictionless));
+  std::map<std::string, sim::TwoBodySession> replays;
+  replays.emplace("friction", sim::TwoBodySession(friction_model));
+  replays.emplace("frictionless", sim::TwoBodySession(frictionless_model));
+  std::map<std::string, int> steps;
+  std::map<std::string, double> max_side_n, max_normal_n;
+  for (const auto& row : ReadCsv(dir + "/trace.csv")) {
+    const std::string& id = row.at("client_id");
+    ASSERT_TRUE(replays.count(id)) << "a session for " << id;
+    const Eigen::Vector3d sent = Vec(row, "fx_n", "fy_n", "fz_n");
+    const Eigen::Vector3d expected = replays.at(id).Step(Vec(row, "x_m", "y_m", "z_m")).device_force_n;
+    ASSERT_TRUE(SameForce(sent, expected)) << id << " sequence " << row.at("sequence") << ": " << sent.transpose()
+                                           << " vs " << expected.transpose();
+    ++steps[id];
+    max_side_n[id] = std::max(max_side_n[id], sent.head<2>().norm());
+    max_normal_n[id] = std::max(max_normal_n[id], std::abs(sent.z()));
+  }
+  EXPECT_GE(steps["friction"], 250);
+  EXPECT_GE(steps["frictionless"], 250);
+  // The scenes really differ: friction drags the tool sideways while it slides; without
+  // friction the contact force is normal to the (flat) obstacle face.
+  EXPECT_GT(max_side_n["friction"], 0.1);
+  EXPECT_LE(max_side_n["frictionless"], 1e-9 * max_normal_n["frictionless"]);
+}
+
 }  // namespace
 }  // namespace hapco::service
