@@ -10,6 +10,8 @@
 
 #include <cmath>
 #include <cstdio>
+#include <fstream>
+#include <filesystem>
 #include <memory>
 #include <vector>
 #include <cstdlib>
@@ -51,6 +53,8 @@ Guide: docs/haptic-service.md.
   --time-budget-ms X  solver wall-clock budget per step, ms (0 = none; default: the scene's
                       solver.time_budget_s); a step out of time answers with the forces it has
                       and status SOLVER_TIME_BUDGET_EXCEEDED
+  --scenes FILE       scene files listed in FILE, one path per line (# comments; relative
+                      paths are relative to FILE's folder), after those on the command line
   --trace FILE        write one CSV row per step (client_id, sequence, position, force sent,
                       step time) for debugging and tests
   --rt-priority N     run the server thread (and DDS's threads) with SCHED_FIFO priority N
@@ -69,6 +73,31 @@ struct Options {
   int rt_priority = 0;
   hapco::service::ServerOptions server;
 };
+
+// --scenes FILE: one scene path per line; blank lines and # comments skipped; a relative
+// path is relative to FILE's folder (so a config file travels with its scenes).
+std::vector<std::string> ReadSceneList(const std::string& list_path) {
+  std::ifstream in(list_path);
+  if (!in) throw hapco::InputError("cannot read scene list " + list_path);
+  const std::filesystem::path folder = std::filesystem::path(list_path).parent_path();
+  std::vector<std::string> paths;
+  std::string line;
+  for (int number = 1; std::getline(in, line); ++number) {
+    const auto hash = line.find('#');
+    if (hash != std::string::npos) line.erase(hash);
+    const auto first = line.find_first_not_of(" \t\r");
+    if (first == std::string::npos) continue;
+    line = line.substr(first, line.find_last_not_of(" \t\r") - first + 1);
+    std::filesystem::path path(line);
+    if (path.is_relative()) path = folder / path;
+    if (!std::filesystem::is_regular_file(path)) {
+      throw hapco::InputError(list_path + ":" + std::to_string(number) + ": no scene file " + path.string());
+    }
+    paths.push_back(path.string());
+  }
+  if (paths.empty()) throw hapco::InputError(list_path + ": lists no scene file");
+  return paths;
+}
 
 Options Parse(int argc, char** argv) {
   Options options;
@@ -97,6 +126,8 @@ Options Parse(int argc, char** argv) {
       const double ms = hapco::cli::ParseDouble("--time-budget-ms", value());
       if (ms < 0) throw hapco::InputError("--time-budget-ms expects a number >= 0");
       options.server.time_budget_s = ms * 1e-3;
+    } else if (arg == "--scenes") {
+      for (std::string& path : ReadSceneList(value())) options.scene_paths.push_back(std::move(path));
     } else if (arg == "--trace") {
       options.trace_path = value();
     } else if (arg == "--quiet") {

@@ -268,7 +268,9 @@ TEST(ServerProcess, TwoScenesServeEachClientTheSceneItNames) {
   const std::string domain = std::to_string(SetUpTestDomain());
   const std::string frictionless = std::string(HAPCO_SOURCE_DIR) + "/tests/data/scenes/coarse_frictionless.txtpb";
   const std::string unknown = std::string(HAPCO_SOURCE_DIR) + "/proto/scenes/benchmark2.txtpb";
-  Process server({HAPCO_SERVER_EXE, kScene, frictionless, "--domain", domain, "--trace", dir + "/trace.csv"},
+  // The second scene comes from a --scenes list file (a path relative to the list).
+  const std::string list = std::string(HAPCO_SOURCE_DIR) + "/tests/data/scenes/served_scenes.txt";
+  Process server({HAPCO_SERVER_EXE, kScene, "--scenes", list, "--domain", domain, "--trace", dir + "/trace.csv"},
                  dir + "/server.out", dir + "/server.err");
   {
     Process with_friction({HAPCO_PHANTOM_EXE, kScene, "--client-id", "friction", "--domain", domain,
