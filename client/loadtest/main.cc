@@ -23,6 +23,7 @@
 #include "common/cli.h"
 #include "common/error.h"
 #include "common/realtime.h"
+#include "common/statistics.h"
 #include "io/scene_file.h"
 #include "loadtest_metrics.h"
 #include "phantom.h"
@@ -198,8 +199,6 @@ struct ClientRun {
   double start_s = 0, end_s = 0;  // since the load test started
 };
 
-double Q(std::vector<double> values, double p) { return hapco::phantom::Quantile(&values, p); }
-
 // One row of the summary (a client, or "all").
 struct Row {
   std::string client;
@@ -251,8 +250,8 @@ ServerSummary SummarizeServer(const std::vector<StatusSample>& all, double windo
     out.cpu_use += s->status.cpu_use;
     out.sessions_max = std::max(out.sessions_max, static_cast<unsigned>(s->status.sessions));
   }
-  out.step_p50_us = Q(p50, 0.5);
-  out.step_p99_us = Q(p99, 0.5);
+  out.step_p50_us = hapco::QuantileOf(p50, 0.5);
+  out.step_p99_us = hapco::QuantileOf(p99, 0.5);
   out.cpu_use /= static_cast<double>(in.size());
   out.steps = in.back()->status.steps - in.front()->status.steps;
   out.superseded = in.back()->status.superseded - in.front()->status.superseded;
@@ -490,12 +489,12 @@ int Run(const Options& o) {
     row.non_finite_received = s.rejected_non_finite;
     row.clamped = s.clamped;
     row.overflowed = s.arrivals_overflowed;
-    row.rt_p50 = Q(s.round_trip_us, 0.5);
-    row.rt_p99 = Q(s.round_trip_us, 0.99);
-    row.rt_p999 = Q(s.round_trip_us, 0.999);
-    row.rt_max = Q(s.round_trip_us, 1.0);
-    row.render_p50 = Q(s.render_latency_us, 0.5);
-    row.render_p99 = Q(s.render_latency_us, 0.99);
+    row.rt_p50 = hapco::QuantileOf(s.round_trip_us, 0.5);
+    row.rt_p99 = hapco::QuantileOf(s.round_trip_us, 0.99);
+    row.rt_p999 = hapco::QuantileOf(s.round_trip_us, 0.999);
+    row.rt_max = hapco::QuantileOf(s.round_trip_us, 1.0);
+    row.render_p50 = hapco::QuantileOf(s.render_latency_us, 0.5);
+    row.render_p99 = hapco::QuantileOf(s.render_latency_us, 0.99);
     row.stability = loadtest::ComputeStability(r->recorder->ticks(), r->recorder->server_forces(),
                                                base.safety.max_force_n);
     const loadtest::PassivityMetrics passivity = loadtest::ComputePassivity(r->recorder->ticks(), tick_s);
@@ -550,12 +549,12 @@ int Run(const Options& o) {
     if (a.d2_server_count > 0) a.d2_server_ms_n2 = d2s_sum / static_cast<double>(a.d2_server_count);
     if (a.d2_server_ms_n2 > 0) a.hf_ratio = a.d2_rendered_ms_n2 / a.d2_server_ms_n2;
   }
-  all.rt_p50 = Q(all_rt, 0.5);
-  all.rt_p99 = Q(all_rt, 0.99);
-  all.rt_p999 = Q(all_rt, 0.999);
-  all.rt_max = Q(all_rt, 1.0);
-  all.render_p50 = Q(all_render, 0.5);
-  all.render_p99 = Q(all_render, 0.99);
+  all.rt_p50 = hapco::QuantileOf(all_rt, 0.5);
+  all.rt_p99 = hapco::QuantileOf(all_rt, 0.99);
+  all.rt_p999 = hapco::QuantileOf(all_rt, 0.999);
+  all.rt_max = hapco::QuantileOf(all_rt, 1.0);
+  all.render_p50 = hapco::QuantileOf(all_render, 0.5);
+  all.render_p99 = hapco::QuantileOf(all_render, 0.99);
 
   std::printf("hapco-loadtest: %zu of %d clients ran %.1f s each (%s%s)%s\n", ran.size(), o.clients, o.duration_s,
               o.mode.c_str(), o.loop ? ", trajectory looped" : "", g_stop.load() ? " - stopped by signal" : "");

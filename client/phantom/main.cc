@@ -17,6 +17,7 @@
 #include "common/cli.h"
 #include "common/error.h"
 #include "common/realtime.h"
+#include "common/statistics.h"
 #include "io/scene_file.h"
 #include "io/trajectory_file.h"
 #include "phantom.h"
@@ -143,8 +144,6 @@ void WriteCsvRows(std::FILE* csv, const hapco::phantom::TickRecord& t) {
   }
 }
 
-double Q(std::vector<double> values, double p) { return hapco::phantom::Quantile(&values, p); }
-
 int Run(const Options& o) {
   using namespace hapco;
   const sim::SceneSpec scene = io::LoadSceneFile(o.scene_path);
@@ -195,9 +194,9 @@ int Run(const Options& o) {
               "peak rendered force %.3f N, pose write errors %llu\n",
               o.client_id.c_str(), s.ticks_run, static_cast<unsigned long long>(s.poses_published),
               static_cast<unsigned long long>(s.forces_received), g_stop.load() ? " (stopped by signal)" : "",
-              Q(s.round_trip_us, 0.5), Q(s.round_trip_us, 0.99), Q(s.round_trip_us, 0.999), Q(s.round_trip_us, 1.0),
-              Q(s.render_latency_us, 0.5), Q(s.render_latency_us, 0.99), Q(s.server_time_us, 0.5),
-              Q(s.server_time_us, 0.99), static_cast<unsigned long long>(s.missed_ticks),
+              hapco::QuantileOf(s.round_trip_us, 0.5), hapco::QuantileOf(s.round_trip_us, 0.99), hapco::QuantileOf(s.round_trip_us, 0.999), hapco::QuantileOf(s.round_trip_us, 1.0),
+              hapco::QuantileOf(s.render_latency_us, 0.5), hapco::QuantileOf(s.render_latency_us, 0.99), hapco::QuantileOf(s.server_time_us, 0.5),
+              hapco::QuantileOf(s.server_time_us, 0.99), static_cast<unsigned long long>(s.missed_ticks),
               static_cast<unsigned long long>(s.stale_ticks), static_cast<unsigned long long>(s.server_losses),
               static_cast<unsigned long long>(s.resumptions), static_cast<unsigned long long>(s.rejected_non_finite),
               static_cast<unsigned long long>(s.clamped), s.peak_rendered_n,

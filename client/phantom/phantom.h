@@ -88,7 +88,4 @@ class HandModel {
   Eigen::Vector3d velocity_m_per_s_ = Eigen::Vector3d::Zero();
 };
 
-// p-quantile (0..1) of values by nearest rank; 0 for an empty input. Reorders `values`.
-double Quantile(std::vector<double>* values, double p);
-
 }  // namespace hapco::phantom

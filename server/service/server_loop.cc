@@ -9,6 +9,7 @@
 #include <ctime>
 
 #include "common/error.h"
+#include "common/statistics.h"
 #include "common/realtime.h"
 
 namespace hapco::service {
@@ -54,14 +55,6 @@ bool ValidId(const std::string& id) {
   } catch (const InputError&) {
     return false;
   }
-}
-
-double Percentile(std::vector<double>* values, double p) {
-  if (values->empty()) return 0.0;
-  auto index = static_cast<std::size_t>(std::ceil(p * static_cast<double>(values->size())));
-  index = index == 0 ? 0 : index - 1;
-  std::nth_element(values->begin(), values->begin() + static_cast<std::ptrdiff_t>(index), values->end());
-  return (*values)[index];
 }
 
 }  // namespace
@@ -344,8 +337,8 @@ void ServerLoop::PublishStatus(int64_t now_ns) {
   std::snprintf(status->server_id, sizeof(status->server_id), "%s", options_.server_id.c_str());
   status->uptime_ns = now_ns - start_ns_;
   status->sessions = static_cast<uint32_t>(sessions_.size());
-  status->step_time_p50_us = Percentile(&step_times_us_, 0.50);
-  status->step_time_p99_us = Percentile(&step_times_us_, 0.99);
+  status->step_time_p50_us = Quantile(&step_times_us_, 0.50);
+  status->step_time_p99_us = Quantile(&step_times_us_, 0.99);
   status->step_time_max_us = step_times_us_.empty() ? 0.0 : *std::max_element(step_times_us_.begin(), step_times_us_.end());
   status->counters = counters_.input;
   // CPU use over the period since the last status (getrusage: this process, all threads,

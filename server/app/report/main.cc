@@ -11,6 +11,7 @@
 
 #include "common/cli.h"
 #include "common/error.h"
+#include "common/statistics.h"
 #include "io/recording.h"
 
 namespace {
@@ -112,11 +113,8 @@ int Run(int argc, char** argv) {
               steps.size(), peak_force_n, peak_device_n, not_converged);
   std::printf("contacts   separating %ld, sticking %ld, sliding %ld (contact-steps)\n", contacts[0], contacts[1],
               contacts[2]);
-  auto percentile = [](std::vector<double> values, double q) {
-    if (values.empty()) return 0.0;
-    std::sort(values.begin(), values.end());
-    return values[static_cast<std::size_t>(q * static_cast<double>(values.size() - 1))];
-  };
+  // Nearest rank, as the phantom and the server report theirs.
+  const auto percentile = &hapco::QuantileOf;
   for (const auto& id : client_order) {
     const ClientSummary& c = clients[id];
     std::printf("client     %s: %ld steps (%llu..%llu), %llu not in the file, %ld without contacts (frame lost)\n",

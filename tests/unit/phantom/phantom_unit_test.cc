@@ -171,14 +171,5 @@ TEST(PhantomHand, FollowsARampWithTheDampingLag) {
   EXPECT_NEAR(lag, p.device_damping_n_s_per_m * v.x() / p.hand_stiffness_n_per_m - v.x() * 1e-3, 1e-9);
 }
 
-TEST(PhantomQuantile, NearestRank) {
-  std::vector<double> v{5, 1, 4, 2, 3};
-  EXPECT_EQ(Quantile(&v, 0.5), 3);
-  EXPECT_EQ(Quantile(&v, 1.0), 5);
-  EXPECT_EQ(Quantile(&v, 0.0), 1);
-  std::vector<double> empty;
-  EXPECT_EQ(Quantile(&empty, 0.5), 0);
-}
-
 }  // namespace
 }  // namespace hapco::phantom
