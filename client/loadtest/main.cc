@@ -339,8 +339,7 @@ int Run(const Options& o) {
   using namespace hapco;
   const auto t0 = std::chrono::steady_clock::now();
   const sim::SceneSpec scene = io::LoadSceneFile(o.scene_path);
-  std::vector<Eigen::Vector3d> points;
-  for (int k = 0; k <= scene.total_steps(); ++k) points.push_back(scene.DeviceTranslationAtStep(k));
+  const std::vector<Eigen::Vector3d> points = scene.DeviceTrajectory();
 
   phantom::ClientConfig base;
   base.domain = o.domain;

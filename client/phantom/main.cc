@@ -8,9 +8,6 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
-#include <cstring>
-#include <fstream>
-#include <sstream>
 #include <string>
 #include <vector>
 
@@ -117,9 +114,7 @@ Options Parse(int argc, char** argv) {
 // Trajectory points 0..N (point 0 = start), m.
 std::vector<Eigen::Vector3d> LoadTrajectory(const Options& o, const hapco::sim::SceneSpec& scene) {
   if (o.trajectory != "scene") return hapco::io::LoadTrajectoryCsv(o.trajectory);
-  std::vector<Eigen::Vector3d> points;
-  for (int k = 0; k <= scene.total_steps(); ++k) points.push_back(scene.DeviceTranslationAtStep(k));
-  return points;
+  return scene.DeviceTrajectory();
 }
 
 std::atomic<bool> g_stop{false};

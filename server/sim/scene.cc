@@ -12,6 +12,13 @@ int SceneSpec::total_steps() const {
   return total;
 }
 
+std::vector<Eigen::Vector3d> SceneSpec::DeviceTrajectory() const {
+  std::vector<Eigen::Vector3d> points;
+  points.reserve(static_cast<std::size_t>(total_steps()) + 1);
+  for (int k = 0; k <= total_steps(); ++k) points.push_back(DeviceTranslationAtStep(k));
+  return points;
+}
+
 Eigen::Vector3d SceneSpec::DeviceTranslationAtStep(int step) const {
   Eigen::Vector3d translation_m = Eigen::Vector3d::Zero();
   int remaining = step;

@@ -42,6 +42,8 @@ struct SceneSpec {
   int total_steps() const;
   // Device translation (m) after `step` increments (0 = start), following the phases.
   Eigen::Vector3d DeviceTranslationAtStep(int step) const;
+  // DeviceTranslationAtStep(k) for k = 0..total_steps(): the device path one point per step.
+  std::vector<Eigen::Vector3d> DeviceTrajectory() const;
   // Index of the phase that step `step` (1-based) belongs to.
   int PhaseOfStep(int step) const;
 };
