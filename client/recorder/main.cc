@@ -5,15 +5,12 @@
 // leaves every complete record readable). docs/recorder.md has the QoS reasoning.
 //
 // Threads: DDS delivers into the reader histories on its own threads; all taking, matching
-// and file I/O happens on the main thread in a waitset loop (never in a listener). A signal
-// handler only writes to a self-pipe; a small thread turns that into a waitset wake-up.
-#include <signal.h>
-#include <unistd.h>
+// and file I/O happens on the main thread in a waitset loop (never in a listener).
+// SIGINT/SIGTERM (common/stop_signals.h) turn into a waitset wake-up.
 
 #include <algorithm>
 #include <atomic>
 #include <chrono>
-#include <cerrno>
 #include <cstdint>
 #include <cstdio>
 #include <cstring>
@@ -23,11 +20,11 @@
 #include <map>
 #include <memory>
 #include <string>
-#include <thread>
 
 #include "common/cli.h"
 #include "common/error.h"
 #include "common/realtime.h"
+#include "common/stop_signals.h"
 #include "contact/solver.h"
 #include "io/recording.h"
 #include "io/scene_file.h"
@@ -321,16 +318,6 @@ class Recorder {
   uint64_t steps_ = 0, missing_steps_ = 0, forces_seen_ = 0, status_records_ = 0, from_forces_ = 0;
 };
 
-// Self-pipe: the handler only write()s the signal number (async-signal-safe); a thread reads
-// it and wakes the waitset (as in hapco-server).
-int g_signal_pipe[2] = {-1, -1};
-
-extern "C" void OnStopSignal(int signal) {
-  const unsigned char value = static_cast<unsigned char>(signal);
-  const ssize_t ignored = write(g_signal_pipe[1], &value, 1);
-  (void)ignored;
-}
-
 hapco::recording::Header MakeHeader(const Options& o) {
   hapco::recording::Header header;
   header.set_format_version(1);
@@ -349,13 +336,7 @@ hapco::recording::Header MakeHeader(const Options& o) {
 }
 
 int Run(const Options& o) {
-  if (pipe(g_signal_pipe) != 0) throw std::runtime_error("pipe() failed");
-  struct sigaction action {};
-  action.sa_handler = &OnStopSignal;
-  sigemptyset(&action.sa_mask);
-  action.sa_flags = SA_RESTART;
-  sigaction(SIGINT, &action, nullptr);
-  sigaction(SIGTERM, &action, nullptr);
+  hapco::StopSignals stop_signals;
 
   // The header goes first, before any DDS traffic: a recorder killed at any time leaves a
   // file with its header. An unwritable path throws InputError (exit 1).
@@ -379,13 +360,8 @@ int Run(const Options& o) {
   std::printf("hapco-recorder: domain %d, recording to %s\n", o.domain, o.output.c_str());
   std::fflush(stdout);
 
-  std::atomic<int> received{0};
   std::atomic<bool> stop{false};
-  std::thread waiter([&] {
-    unsigned char value = 0;
-    while (read(g_signal_pipe[0], &value, 1) < 0 && errno == EINTR) {
-    }
-    received = value;  // 0: the main thread ended the loop itself
+  const auto watching = stop_signals.Watch([&] {
     stop = true;
     waitset.Wake();
   });
@@ -413,34 +389,23 @@ int Run(const Options& o) {
   const int64_t start_ns = hapco::MonotonicNowNs();
   const int64_t end_ns = o.duration_s > 0 ? start_ns + static_cast<int64_t>(o.duration_s * 1e9) : INT64_MAX;
   int64_t next_progress_ns = start_ns + 1'000'000'000;
-  auto stop_waiter = [&] {
-    const unsigned char zero = 0;
-    if (write(g_signal_pipe[1], &zero, 1) != 1) std::perror("hapco-recorder: write");
-    waiter.join();
-  };
-  try {
-    while (!stop) {
-      const int64_t now = hapco::MonotonicNowNs();
-      if (now >= end_ns) break;
-      const int64_t wait_ns = std::min<int64_t>({end_ns - now, next_progress_ns - now, 200'000'000});
-      waitset.Wait(std::max<int64_t>(wait_ns, 0));
-      drain();
-      if (hapco::MonotonicNowNs() >= next_progress_ns) {
-        next_progress_ns += 1'000'000'000;
-        if (!o.quiet) {
-          std::fprintf(stderr, "hapco-recorder: %llu records, %zu clients, %llu missing steps\n",
-                       static_cast<unsigned long long>(writer.records_written()), recorder.clients(),
-                       static_cast<unsigned long long>(recorder.missing_steps()));
-        }
+  while (!stop) {
+    const int64_t now = hapco::MonotonicNowNs();
+    if (now >= end_ns) break;
+    const int64_t wait_ns = std::min<int64_t>({end_ns - now, next_progress_ns - now, 200'000'000});
+    waitset.Wait(std::max<int64_t>(wait_ns, 0));
+    drain();
+    if (hapco::MonotonicNowNs() >= next_progress_ns) {
+      next_progress_ns += 1'000'000'000;
+      if (!o.quiet) {
+        std::fprintf(stderr, "hapco-recorder: %llu records, %zu clients, %llu missing steps\n",
+                     static_cast<unsigned long long>(writer.records_written()), recorder.clients(),
+                     static_cast<unsigned long long>(recorder.missing_steps()));
       }
     }
-    drain();  // what was received before the stop
-    recorder.FlushPending();
-  } catch (...) {
-    stop_waiter();
-    throw;
   }
-  stop_waiter();
+  drain();  // what was received before the stop
+  recorder.FlushPending();
   std::printf("hapco-recorder: %llu steps from %zu clients, %llu missing steps, %llu status records, "
               "%llu forces seen, file %s (%llu steps from forces alone; stopped by %s)\n",
               static_cast<unsigned long long>(recorder.steps()), recorder.clients(),
@@ -448,7 +413,7 @@ int Run(const Options& o) {
               static_cast<unsigned long long>(recorder.status_records()),
               static_cast<unsigned long long>(recorder.forces_seen()), o.output.c_str(),
               static_cast<unsigned long long>(recorder.from_forces()),
-              received == SIGINT ? "SIGINT" : received == SIGTERM ? "SIGTERM" : "--duration");
+              stop_signals.ReceivedName("--duration"));
   return 0;
 }
 

@@ -1,28 +1,20 @@
 // hapco-server: the haptic service. Loads one or more scenes (each TwoBodyModel is shared by
 // its sessions), serves any number of clients over DDS (one TwoBodySession each), one step
 // per pose. Thin: the work is in hapco::service::ServerLoop and Session.
-#include <pthread.h>
-#include <sched.h>
-#include <signal.h>
-#include <unistd.h>
-
-#include <cerrno>
-
 #include <cmath>
 #include <cstdio>
-#include <fstream>
-#include <filesystem>
-#include <memory>
-#include <vector>
 #include <cstdlib>
 #include <cstring>
+#include <filesystem>
+#include <fstream>
 #include <memory>
 #include <string>
-#include <thread>
+#include <vector>
 
 #include "common/cli.h"
 #include "common/error.h"
 #include "common/realtime.h"
+#include "common/stop_signals.h"
 #include "common/timer.h"
 #include "io/scene_file.h"
 #include "service/server_loop.h"
@@ -142,25 +134,8 @@ Options Parse(int argc, char** argv) {
   return options;
 }
 
-// Self-pipe: the handler only write()s the signal number (async-signal-safe); a thread
-// reads it and wakes the server's WaitSet. (Blocking the signals instead is not enough:
-// a thread created before main() - a library's - would still take the default action.)
-int g_signal_pipe[2] = {-1, -1};
-
-extern "C" void OnShutdownSignal(int signal) {
-  const unsigned char value = static_cast<unsigned char>(signal);
-  const ssize_t ignored = write(g_signal_pipe[1], &value, 1);
-  (void)ignored;
-}
-
 int Run(const Options& options) {
-  if (pipe(g_signal_pipe) != 0) throw std::runtime_error("pipe() failed");
-  struct sigaction action {};
-  action.sa_handler = &OnShutdownSignal;
-  sigemptyset(&action.sa_mask);
-  action.sa_flags = SA_RESTART;
-  sigaction(SIGINT, &action, nullptr);
-  sigaction(SIGTERM, &action, nullptr);
+  hapco::StopSignals stop_signals;  // from now on: a signal during the setup is kept
 
   hapco::Stopwatch setup;
   // Every scene's precomputation (factorisations, compliance) once, before serving.
@@ -187,28 +162,10 @@ int Run(const Options& options) {
               scenes_line.c_str(), options.domain, setup.ElapsedSeconds());
   std::fflush(stdout);
 
-  int received = 0;
-  std::thread waiter([&] {
-    unsigned char value = 0;
-    while (read(g_signal_pipe[0], &value, 1) < 0 && errno == EINTR) {
-    }
-    received = value;  // 0: woken by the main thread (the server loop ended on its own)
-    server.RequestStop();
-  });
-  auto stop_waiter = [&] {
-    const unsigned char zero = 0;
-    if (write(g_signal_pipe[1], &zero, 1) != 1) std::perror("hapco-server: write");
-    waiter.join();
-  };
-  try {
-    server.Run();
-  } catch (...) {
-    stop_waiter();
-    throw;
-  }
-  stop_waiter();
+  const auto watching = stop_signals.Watch([&server] { server.RequestStop(); });
+  server.Run();
   std::printf("%s; stopped by %s\n", server.Summary().c_str(),
-              received == SIGINT ? "SIGINT" : received == SIGTERM ? "SIGTERM" : "request");
+              stop_signals.ReceivedName("request"));
   return 0;
 }
 
