@@ -151,7 +151,6 @@ ServerLoop::Client* ServerLoop::OpenSession(const std::string& client_id, const 
   }
   try {
     Client client;
-    client.model = &model;
     client.session = std::make_unique<Session>(client_id, model, participant_, force_topic_, contact_topic_,
                                                options_.time_budget_s);
     auto [it, inserted] = sessions_.emplace(client_id, std::move(client));
@@ -201,7 +200,7 @@ void ServerLoop::ProcessSessionControls() {
           if (it != sessions_.end()) CloseSession(it);
           break;
         }
-        if (it != sessions_.end() && it->second.model != model) {
+        if (it != sessions_.end() && &it->second.session->model() != model) {
           CloseSession(it);  // the client switches scene: a new session on the new one
           it = sessions_.end();
         }

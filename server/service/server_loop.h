@@ -77,7 +77,6 @@ class ServerLoop {
 
  private:
   struct Client {
-    const sim::TwoBodyModel* model = nullptr;  // the scene of this session
     std::unique_ptr<Session> session;
     hapco_idl_DevicePose pending{};
     int64_t pending_receive_ns = 0;

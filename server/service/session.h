@@ -70,6 +70,7 @@ class Session {
 
   const SessionCounters& counters() const { return counters_; }
   const sim::StepOutput& last_output() const { return sim_.last_output(); }
+  const sim::TwoBodyModel& model() const { return sim_.model(); }  // this session's scene
   uint64_t last_sequence() const { return last_sequence_; }
   const Eigen::Vector3d& last_force_n() const { return last_good_force_n_; }  // last sent, N
 

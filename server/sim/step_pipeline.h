@@ -71,6 +71,8 @@ class TwoBodySession {
   // Back to the reference configuration (no displacement, no force, step 0).
   void Reset();
 
+  const TwoBodyModel& model() const { return model_; }
+
   // Runs one step for the device translation d (m, from the device's home position).
   const StepOutput& Step(const Eigen::Vector3d& device_translation_m);
 
