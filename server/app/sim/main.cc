@@ -37,8 +37,10 @@ detection, flexibility operator, frictional contact solve, force on the device.
   --mode MODE       precomputed (default; per-scene compliance, O(contacts) per step) or
                     full (the paper's per-step sparse solves; slow, the reference)
   --steps N         stop after N steps (default: the whole trajectory)
-  --trajectory FILE step k moves the tool to row k of FILE (CSV x_m,y_m,z_m, a header line
-                    is skipped) instead of the scene's phases; e.g. the poses a server stepped
+  --trajectory FILE step k moves the tool to row k of FILE instead of the scene's phases: a
+                    CSV with columns x_m,y_m,z_m (hapco-server --trace) or dx_m,dy_m,dz_m
+                    (hapco-sim --csv, hapco-report --csv), found by header name
+  --client ID       with --trajectory: the rows of that client_id (files of several clients)
   --csv FILE        one row per step (see the header line for columns and units)
   --vtk DIR         write ParaView files to DIR: deformed bodies and contact points every
                     --vtk-every steps (default 10) and at the last step; open DIR/hapco.pvd
@@ -52,7 +54,7 @@ Exit code: 0 when every step converged, 2 when some did not (the run completes),
 )";
 
 struct Options {
-  std::string scene_path, csv_path, vtk_dir, record_path, solver_name, mode = "precomputed", trajectory_path;
+  std::string scene_path, csv_path, vtk_dir, record_path, solver_name, mode = "precomputed", trajectory_path, client_id;
   double tolerance_m = 0, friction = -1, rho_scale = 1;
   int max_iterations = 0, steps = 0, vtk_every = 10;
   bool cold = false, quiet = false;
@@ -91,6 +93,8 @@ Options Parse(int argc, char** argv) {
       }
     } else if (arg == "--trajectory") {
       options.trajectory_path = value();
+    } else if (arg == "--client") {
+      options.client_id = value();
     } else if (arg == "--steps") {
       options.steps = static_cast<int>(hapco::cli::ParseInteger("--steps", value(), 1, 100000000));
     } else if (arg == "--csv") {
@@ -241,7 +245,7 @@ int Run(const Options& options) {
   }
   // The tool's translation per step: the scene's phases, or a file's rows (phase "file").
   std::vector<Eigen::Vector3d> file_points;
-  if (!options.trajectory_path.empty()) file_points = hapco::io::LoadTrajectoryCsv(options.trajectory_path);
+  if (!options.trajectory_path.empty()) file_points = hapco::io::LoadTrajectoryCsv(options.trajectory_path, options.client_id);
   const int trajectory_steps = file_points.empty() ? scene.total_steps() : static_cast<int>(file_points.size()) - 1;
   auto translation_at = [&](int step) {
     return file_points.empty() ? scene.DeviceTranslationAtStep(step) : file_points[static_cast<std::size_t>(step)];
