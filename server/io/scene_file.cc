@@ -198,8 +198,13 @@ class SceneChecker {
       Fail("contact", contact, tree, "activation_gap_m",
            "must be a finite distance > 0 m, got " + Number(contact.activation_gap_m()));
     }
+    if (!(contact.reach_m() >= 0.0) || !std::isfinite(contact.reach_m())) {
+      Fail("contact", contact, tree, "reach_m",
+           "must be a finite distance >= 0 m (0: the default 0.1 m), got " + Number(contact.reach_m()));
+    }
     spec->friction_coefficient = contact.friction_coefficient();
     spec->activation_gap_m = contact.activation_gap_m();
+    if (contact.reach_m() > 0.0) spec->reach_m = contact.reach_m();
   }
 
   void CheckSolver(const pb::Scene& scene, sim::SceneSpec* spec) const {
@@ -234,6 +239,12 @@ class SceneChecker {
     }
     parameters.time_budget_s = solver.time_budget_s();
     parameters.warm_start = solver.warm_start();
+    switch (solver.rho_rule()) {
+      case pb::RHO_RULE_UNSPECIFIED:
+      case pb::PAPER_GLOBAL_MIN: parameters.rho_rule = contact::RhoRule::kPaperGlobalMin; break;
+      case pb::PER_CONTACT: parameters.rho_rule = contact::RhoRule::kPerContact; break;
+      default: Fail("solver", solver, tree, "rho_rule", "must be PAPER_GLOBAL_MIN or PER_CONTACT");
+    }
   }
 
   void CheckTrajectory(const pb::Scene& scene, sim::SceneSpec* spec) const {

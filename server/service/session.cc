@@ -41,7 +41,8 @@ Session::Session(std::string client_id, const sim::TwoBodyModel& model,
   SetClientId(force_.client_id, client_id_);
   SetClientId(frame_->client_id, client_id_);
   const auto capacity = static_cast<uint32_t>(
-      std::min<std::size_t>(model.tool_candidates().size(), hapco_idl_MAX_CONTACT_SAMPLES));
+      std::min<std::size_t>(model.tool_candidates().size() + model.obstacle_edge_nodes().size(),
+                            hapco_idl_MAX_CONTACT_SAMPLES));
   ReserveContacts(frame_.get(), capacity);
 }
 

@@ -90,6 +90,14 @@ void CheckParameters(const CollisionParameters& p) {
     throw InputError("collision edge_tolerance must be in [0, 0.1] (barycentric slack), got " +
                      std::to_string(p.edge_tolerance));
   }
+  if (!(p.persistence_min_cosine > 0.0 && p.persistence_min_cosine <= 1.0)) {
+    throw InputError("collision persistence_min_cosine must be in (0, 1] (a cosine), got " +
+                     std::to_string(p.persistence_min_cosine));
+  }
+  if (!(p.persistent_edge_tolerance >= 0.0 && p.persistent_edge_tolerance <= 0.5)) {
+    throw InputError("collision persistent_edge_tolerance must be in [0, 0.5] (barycentric slack), got " +
+                     std::to_string(p.persistent_edge_tolerance));
+  }
   if (!(p.min_normal_opposition >= -1.0 && p.min_normal_opposition <= 1.0)) {
     throw InputError("collision min_normal_opposition must be in [-1, 1] (a cosine), got " +
                      std::to_string(p.min_normal_opposition));
@@ -157,6 +165,7 @@ ContactDetector::ContactDetector(std::vector<fem::SurfaceTriangle> obstacle_tria
                        " is degenerate (zero area) in the reference configuration");
     }
     centroids[static_cast<std::size_t>(t)] = (a + b + c) / 3.0;
+    reference_normals_.push_back((b - a).cross(c - a).normalized());
     edge_sum_m += (b - a).norm() + (c - b).norm() + (a - c).norm();
   }
   tie_tolerance_m_ = kTieRelative * edge_sum_m / (3.0 * n_tri);
@@ -186,7 +195,27 @@ ContactDetector::ContactDetector(std::vector<fem::SurfaceTriangle> obstacle_tria
   const int depth = BuildNode(centroids, 0, n_tri, 0);
   stack_.reserve(static_cast<std::size_t>(2 * depth + 4));
   triangle_boxes_.resize(static_cast<std::size_t>(n_tri));
-  candidates_.reserve(16);
+  candidates_.reserve(64);
+
+  // Corner neighbours for persistent contacts (a node slides at most onto an adjacent face
+  // per step at haptic increments).
+  std::vector<std::vector<int>> faces_of_node(static_cast<std::size_t>(num_obstacle_nodes_));
+  for (int t = 0; t < n_tri; ++t) {
+    for (int id : triangles_[static_cast<std::size_t>(t)].corners) faces_of_node[static_cast<std::size_t>(id)].push_back(t);
+  }
+  neighbour_offsets_.assign(static_cast<std::size_t>(n_tri) + 1, 0);
+  std::vector<int> around;
+  for (int t = 0; t < n_tri; ++t) {
+    around.clear();
+    for (int id : triangles_[static_cast<std::size_t>(t)].corners) {
+      const auto& f = faces_of_node[static_cast<std::size_t>(id)];
+      around.insert(around.end(), f.begin(), f.end());
+    }
+    std::sort(around.begin(), around.end());
+    around.erase(std::unique(around.begin(), around.end()), around.end());
+    neighbours_.insert(neighbours_.end(), around.begin(), around.end());
+    neighbour_offsets_[static_cast<std::size_t>(t) + 1] = static_cast<int>(neighbours_.size());
+  }
   stats_.triangles_total = n_tri;
 }
 
@@ -241,7 +270,8 @@ void ContactDetector::ValidateCall(const PointsRef& obstacle_positions_m,
 }
 
 void ContactDetector::Refit(const PointsRef& obstacle_positions_m,
-                            const CollisionParameters& parameters) {
+                            const CollisionParameters& parameters,
+                            const std::vector<char>* triangle_enabled) {
   // A qualifying node lies within max(activation, penetration) of the face plane and its
   // projection is within edge_tolerance (barycentric) of the face, i.e. at most
   // 2·edge_tolerance·extent outside the face's box along any axis (two coordinates can be
@@ -251,10 +281,15 @@ void ContactDetector::Refit(const PointsRef& obstacle_positions_m,
       std::max(parameters.activation_gap_m, parameters.max_penetration_m);
   for (std::size_t slot = 0; slot < order_.size(); ++slot) {
     const auto& tri = triangles_[static_cast<std::size_t>(order_[slot])];
+    Box& box = triangle_boxes_[slot];
+    if (triangle_enabled != nullptr && !(*triangle_enabled)[static_cast<std::size_t>(order_[slot])]) {
+      box.min.setConstant(std::numeric_limits<double>::infinity());  // empty: never entered
+      box.max.setConstant(-std::numeric_limits<double>::infinity());
+      continue;
+    }
     const Eigen::Vector3d a = Row(obstacle_positions_m, tri.corners[0]);
     const Eigen::Vector3d b = Row(obstacle_positions_m, tri.corners[1]);
     const Eigen::Vector3d c = Row(obstacle_positions_m, tri.corners[2]);
-    Box& box = triangle_boxes_[slot];
     box.min = a.cwiseMin(b).cwiseMin(c);
     box.max = a.cwiseMax(b).cwiseMax(c);
     const double extent_m = (box.max - box.min).maxCoeff();
@@ -284,7 +319,8 @@ void ContactDetector::Refit(const PointsRef& obstacle_positions_m,
 
 void ContactDetector::TestTriangle(int triangle, const Eigen::Vector3d& x, int tool_index,
                                    const PointsRef& obstacle_positions_m,
-                                   const CollisionParameters& parameters) {
+                                   const CollisionParameters& parameters, double max_depth_m,
+                                   double edge_tolerance, const Eigen::Vector3d& previous_normal) {
   ++stats_.triangles_tested;
   const auto& tri = triangles_[static_cast<std::size_t>(triangle)];
   const Eigen::Vector3d a = Row(obstacle_positions_m, tri.corners[0]);
@@ -294,15 +330,18 @@ void ContactDetector::TestTriangle(int triangle, const Eigen::Vector3d& x, int t
   const double twice_area_m2 = cross.norm();
   if (!(twice_area_m2 > 0.0)) return;  // collapsed (or non-finite) face: no normal
   const Eigen::Vector3d n = cross / twice_area_m2;
+  // Normal compatibility and persistence on the reference normals (small-displacement theory,
+  // like the contact frames): a face folded by a large local indentation keeps its identity.
+  const Eigen::Vector3d& reference_n = reference_normals_[static_cast<std::size_t>(triangle)];
   if (!tool_normals_.empty() &&
-      -n.dot(tool_normals_[static_cast<std::size_t>(tool_index)]) <
+      -reference_n.dot(tool_normals_[static_cast<std::size_t>(tool_index)]) <
           parameters.min_normal_opposition) {
     return;
   }
   const double gap_m = (x - a).dot(n);
-  if (!(gap_m < parameters.activation_gap_m && gap_m >= -parameters.max_penetration_m)) return;
+  if (!(gap_m < parameters.activation_gap_m && gap_m >= -max_depth_m)) return;
   const Eigen::Vector3d projection = ProjectionBarycentric(x, a, b, c);
-  if (!(projection.minCoeff() >= -parameters.edge_tolerance)) return;
+  if (!(projection.minCoeff() >= -edge_tolerance)) return;
   // Inside (or within the slack of) the face: the closest point is the projection itself, or
   // for a projection just outside an edge the nearest point of that edge.
   const Eigen::Vector3d bary =
@@ -313,25 +352,48 @@ void ContactDetector::TestTriangle(int triangle, const Eigen::Vector3d& x, int t
   candidate.point_m = bary[0] * a + bary[1] * b + bary[2] * c;
   candidate.normal = n;
   candidate.barycentric = bary;
+  candidate.persistent = previous_normal.dot(reference_n) >= parameters.persistence_min_cosine;
+  candidate.outside = std::max(0.0, -projection.minCoeff());
 }
 
-void ContactDetector::Select(int tool_index, std::vector<ContactPoint>* contacts) const {
+void ContactDetector::Select(int tool_index, const CollisionParameters& parameters,
+                             std::vector<ContactPoint>* contacts) const {
   if (candidates_.empty()) return;
+  // Faces in the persistence cone of the node's previous face first, at any depth; without
+  // one, only faces within max_penetration_m (a new contact).
+  const bool any_persistent =
+      std::any_of(candidates_.begin(), candidates_.end(), [](const Candidate& c) { return c.persistent; });
+  auto qualifies = [&](const Candidate& c) {
+    return any_persistent ? c.persistent : c.gap_m >= -parameters.max_penetration_m;
+  };
+  // A face that holds the node's projection beats one reached only with the persistent slack
+  // (a coplanar neighbour would otherwise tie on the gap and move the point to its edge).
+  const bool any_inside = std::any_of(candidates_.begin(), candidates_.end(), [&](const Candidate& c) {
+    return qualifies(c) && c.outside <= parameters.edge_tolerance;
+  });
+  auto eligible = [&](const Candidate& c) {
+    return qualifies(c) && (!any_inside || c.outside <= parameters.edge_tolerance);
+  };
   // Order-independent choice (the tree and the brute force visit faces in different
   // orders): smallest |gap|, then, among ties within round-off, the lowest triangle index.
   double best_abs_gap_m = std::numeric_limits<double>::infinity();
-  for (const auto& c : candidates_) best_abs_gap_m = std::min(best_abs_gap_m, std::abs(c.gap_m));
+  for (const auto& c : candidates_) {
+    if (eligible(c)) best_abs_gap_m = std::min(best_abs_gap_m, std::abs(c.gap_m));
+  }
   const Candidate* best = nullptr;
   for (const auto& c : candidates_) {
-    if (std::abs(c.gap_m) <= best_abs_gap_m + tie_tolerance_m_ &&
+    if (eligible(c) && std::abs(c.gap_m) <= best_abs_gap_m + tie_tolerance_m_ &&
         (best == nullptr || c.triangle < best->triangle)) {
       best = &c;
     }
   }
+  if (best == nullptr) return;
   const auto& tri = triangles_[static_cast<std::size_t>(best->triangle)];
   ContactPoint& contact = contacts->emplace_back();
   contact.tool_node = tool_nodes_[static_cast<std::size_t>(tool_index)];
+  contact.node_slot = tool_index;
   contact.obstacle_triangle = best->triangle;
+  contact.barycentric = best->barycentric;
   contact.obstacle_nodes.fill(-1);
   contact.weights.fill(0.0);
   const Eigen::Vector3d& l = best->barycentric;
@@ -362,14 +424,26 @@ void ContactDetector::Select(int tool_index, std::vector<ContactPoint>* contacts
 void ContactDetector::Detect(const PointsRef& obstacle_positions_m,
                              const PointsRef& tool_positions_m,
                              const CollisionParameters& parameters,
-                             std::vector<ContactPoint>* contacts) {
+                             std::vector<ContactPoint>* contacts,
+                             const DetectionContext& context) {
   HAPCO_ASSERT(contacts != nullptr, "Detect needs an output vector");
   ValidateCall(obstacle_positions_m, tool_positions_m, parameters);
-  Refit(obstacle_positions_m, parameters);
+  HAPCO_ASSERT(context.previous_triangle == nullptr || context.previous_triangle->size() == tool_nodes_.size(),
+               "one previous triangle per tool node");
+  HAPCO_ASSERT(context.node_enabled == nullptr || context.node_enabled->size() == tool_nodes_.size(),
+               "one enabled flag per tool node");
+  HAPCO_ASSERT(context.triangle_enabled == nullptr || context.triangle_enabled->size() == triangles_.size(),
+               "one enabled flag per triangle");
+  Refit(obstacle_positions_m, parameters, context.triangle_enabled);
   contacts->clear();
   stats_ = DetectorStats{};
   stats_.triangles_total = static_cast<std::int64_t>(triangles_.size());
+  const Eigen::Vector3d no_history = Eigen::Vector3d::Zero();
   for (std::size_t i = 0; i < tool_nodes_.size(); ++i) {
+    if (context.node_enabled != nullptr && !(*context.node_enabled)[i]) continue;
+    const int previous = context.previous_triangle != nullptr ? (*context.previous_triangle)[i] : -1;
+    const Eigen::Vector3d& previous_normal =
+        previous >= 0 ? reference_normals_[static_cast<std::size_t>(previous)] : no_history;
     const Eigen::Vector3d x = Row(tool_positions_m, tool_nodes_[i]);
     ++stats_.queries;
     candidates_.clear();
@@ -390,14 +464,26 @@ void ContactDetector::Detect(const PointsRef& obstacle_positions_m,
             continue;
           }
           TestTriangle(order_[static_cast<std::size_t>(s)], x, static_cast<int>(i),
-                       obstacle_positions_m, parameters);
+                       obstacle_positions_m, parameters, parameters.max_penetration_m,
+                       parameters.edge_tolerance, previous_normal);
         }
       } else {
         stack_.push_back(node.right);
         stack_.push_back(self + 1);
       }
     }
-    Select(static_cast<int>(i), contacts);
+    if (previous >= 0) {
+      // The persistent faces, at any depth (a face found twice gives the same candidate).
+      for (int k = neighbour_offsets_[static_cast<std::size_t>(previous)];
+           k < neighbour_offsets_[static_cast<std::size_t>(previous) + 1]; ++k) {
+        const int t = neighbours_[static_cast<std::size_t>(k)];
+        if (context.triangle_enabled != nullptr && !(*context.triangle_enabled)[static_cast<std::size_t>(t)]) continue;
+        TestTriangle(t, x, static_cast<int>(i), obstacle_positions_m, parameters,
+                     std::numeric_limits<double>::infinity(), parameters.persistent_edge_tolerance,
+                     previous_normal);
+      }
+    }
+    Select(static_cast<int>(i), parameters, contacts);
   }
 }
 
@@ -415,9 +501,10 @@ void ContactDetector::DetectBruteForce(const PointsRef& obstacle_positions_m,
     ++stats_.queries;
     candidates_.clear();
     for (int t = 0; t < static_cast<int>(triangles_.size()); ++t) {
-      TestTriangle(t, x, static_cast<int>(i), obstacle_positions_m, parameters);
+      TestTriangle(t, x, static_cast<int>(i), obstacle_positions_m, parameters,
+                   parameters.max_penetration_m, parameters.edge_tolerance, Eigen::Vector3d::Zero());
     }
-    Select(static_cast<int>(i), contacts);
+    Select(static_cast<int>(i), parameters, contacts);
   }
 }
 

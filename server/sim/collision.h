@@ -31,7 +31,10 @@ using PointsRef = Eigen::Ref<const Eigen::Matrix<double, Eigen::Dynamic, 3>>;
 // One active contact: a tool node facing a point on an obstacle surface triangle.
 struct ContactPoint {
   int tool_node = -1;          // node id in the tool mesh
+  int node_slot = -1;          // position of tool_node in the detector's node list
   int obstacle_triangle = -1;  // index into the detector's obstacle triangle list
+  // Barycentric coordinates of obstacle_point_m in the flat face (corners 0, 1, 2).
+  Eigen::Vector3d barycentric = Eigen::Vector3d::Zero();
   // Nodes carrying the obstacle side: 3 corners (Tet4 face) or 3 corners then the midsides on
   // edges (c0,c1) (c1,c2) (c2,c0) (Tet10 face); unused entries are -1 with weight 0.
   std::array<int, 6> obstacle_nodes{};
@@ -59,9 +62,30 @@ struct CollisionParameters {
   // round-off (and is then assigned to one face only, see ContactDetector).
   double edge_tolerance = 1e-9;
   // Normal compatibility, dimensionless: with tool normals given, a face qualifies only when
-  // −n_face·n_tool >= this (0.5: the face normal within 60° of the reversed tool normal).
+  // −n_face·n_tool >= this, both reference normals (0.5: the face normal within 60° of the
+  // reversed tool normal).
   // It keeps a tool node lying on an obstacle edge on the face it rests on, not on the side.
   double min_normal_opposition = 0.5;
+  // Persistence, dimensionless cosine: a node whose contact of the previous step was on face
+  // F (DetectionContext::previous_triangle) keeps a face whose normal is within this of F's
+  // (0.7071: 45°), at any depth, before any other face is considered. Without it a node
+  // pressed below an obstacle edge could be matched to the side face it is nearest to.
+  double persistence_min_cosine = 0.7071067811865476;
+  // Barycentric slack for the persistent faces, dimensionless: deformed faces fold at their
+  // shared edges, so a node on such an edge can project just outside both (measured: 1e-5);
+  // 0.05 keeps it on them (the closest point of the face is used).
+  double persistent_edge_tolerance = 0.05;
+};
+
+// Optional per-call inputs of Detect.
+struct DetectionContext {
+  // Per tool node (tool_nodes order): the obstacle triangle of its contact in the previous
+  // step, or -1. That face and the faces sharing a corner with it are tested at any depth.
+  const std::vector<int>* previous_triangle = nullptr;
+  // Per obstacle triangle / per tool node: 0 skips it (faces whose nodes have stale
+  // positions, nodes out of the broad phase's region). nullptr: everything is enabled.
+  const std::vector<char>* triangle_enabled = nullptr;
+  const std::vector<char>* node_enabled = nullptr;
 };
 
 // Work counters of the last Detect call, for tests and benchmarks.
@@ -98,8 +122,13 @@ class ContactDetector {
   // projection misses every face (beyond a convex edge, outside the footprint) has none.
   // Allocation-free once *contacts has capacity for all tool nodes (reserve it, or reuse).
   // Throws InputError for position arrays too short or invalid parameters.
+  // With a context: nodes and faces disabled there are skipped; a node with a previous
+  // triangle also tests that face and its corner neighbours with no depth limit and prefers,
+  // among all faces that qualify, those within persistence_min_cosine of the previous face's
+  // normal (reference normals); without history the rules above apply unchanged.
   void Detect(const PointsRef& obstacle_positions_m, const PointsRef& tool_positions_m,
-              const CollisionParameters& parameters, std::vector<ContactPoint>* contacts);
+              const CollisionParameters& parameters, std::vector<ContactPoint>* contacts,
+              const DetectionContext& context = {});
 
   // Same rules, every triangle tested for every node: the reference for tests/benchmarks.
   void DetectBruteForce(const PointsRef& obstacle_positions_m, const PointsRef& tool_positions_m,
@@ -130,17 +159,24 @@ class ContactDetector {
     Eigen::Vector3d point_m = Eigen::Vector3d::Zero();
     Eigen::Vector3d normal = Eigen::Vector3d::Zero();
     Eigen::Vector3d barycentric = Eigen::Vector3d::Zero();
+    bool persistent = false;  // within the persistence cone of the node's previous face
+    double outside = 0.0;     // how far the projection lies outside the face (barycentric, >= 0)
   };
 
   int BuildNode(const std::vector<Eigen::Vector3d>& centroids, int begin, int end, int depth);
   void ValidateCall(const PointsRef& obstacle_positions_m, const PointsRef& tool_positions_m,
                     const CollisionParameters& parameters) const;
-  void Refit(const PointsRef& obstacle_positions_m, const CollisionParameters& parameters);
+  void Refit(const PointsRef& obstacle_positions_m, const CollisionParameters& parameters,
+             const std::vector<char>* triangle_enabled);
   // Exact test of one triangle; appends to candidates_ when the pair qualifies.
+  // max_depth_m: deepest gap accepted; previous_normal: unit normal of the node's previous
+  // face (zero without history).
   void TestTriangle(int triangle, const Eigen::Vector3d& x, int tool_index,
-                    const PointsRef& obstacle_positions_m, const CollisionParameters& parameters);
+                    const PointsRef& obstacle_positions_m, const CollisionParameters& parameters,
+                    double max_depth_m, double edge_tolerance, const Eigen::Vector3d& previous_normal);
   // Picks the winner among candidates_ and appends the contact.
-  void Select(int tool_index, std::vector<ContactPoint>* contacts) const;
+  void Select(int tool_index, const CollisionParameters& parameters,
+              std::vector<ContactPoint>* contacts) const;
 
   std::vector<fem::SurfaceTriangle> triangles_;
   std::vector<int> tool_nodes_;
@@ -154,6 +190,9 @@ class ContactDetector {
   std::vector<Box> triangle_boxes_;  // per order_ slot, inflated by the search margin
   std::vector<int> stack_;          // traversal stack, sized once
   std::vector<Candidate> candidates_;  // per-query scratch, capacity reused
+  // Faces sharing a corner with each face (itself included): CSR offsets and ids.
+  std::vector<int> neighbour_offsets_, neighbours_;
+  std::vector<Eigen::Vector3d> reference_normals_;  // per face, reference configuration
   DetectorStats stats_;
 };
 

@@ -34,6 +34,9 @@ struct SceneSpec {
   BodySpec tool;      // the paper's green body, driven by the device
   double friction_coefficient = 0.3;  // Coulomb μ, dimensionless
   double activation_gap_m = 5e-4;     // candidate contacts closer than this are active
+  // Device workspace radius, m: obstacle faces within this distance of the tool's home box
+  // are contact candidates (TwoBodyModel), independent of the trajectory.
+  double reach_m = 0.1;
   contact::SolverKind solver = contact::SolverKind::kLocalUzawa;
   contact::SolverParameters solver_parameters;
   std::vector<TrajectoryPhase> trajectory;

@@ -1,6 +1,7 @@
 #include "sim/step_pipeline.h"
 
 #include <algorithm>
+#include <limits>
 
 #include "common/error.h"
 #include "common/timer.h"
@@ -8,8 +9,17 @@
 namespace hapco::sim {
 namespace {
 
-Eigen::Vector3d Block(const Eigen::VectorXd& vector, int index) {
-  return vector.segment<3>(3 * index);
+// Barycentric distance below which a reverse-pass point counts as lying on a face edge or a
+// node (dimensionless): there the tool's own nodes already carry the contact (pass 1).
+// The tool deforms, so this is a few percent of a face, not round-off.
+constexpr double kOnEdge = 0.02;
+
+Eigen::Vector3d Block(const Eigen::VectorXd& vector, int index) { return vector.segment<3>(3 * index); }
+
+std::vector<int> Identity(std::size_t n) {
+  std::vector<int> rows(n);
+  for (std::size_t i = 0; i < n; ++i) rows[i] = static_cast<int>(i);
+  return rows;
 }
 
 }  // namespace
@@ -17,47 +27,219 @@ Eigen::Vector3d Block(const Eigen::VectorXd& vector, int index) {
 TwoBodySession::TwoBodySession(const TwoBodyModel& model, SolveMode mode)
     : model_(model),
       mode_(mode),
-      detector_(model.obstacle_triangles(), model.obstacle().mesh().nodes_m,
-                model.tool_candidates(), model.tool_candidate_normals()) {
+      tool_surface_(model.tool_surface()),
+      obstacle_surface_(model.obstacle_surface()),
+      tool_pass_(model.obstacle_surface().triangles, model.obstacle().mesh().nodes_m,
+                 model.tool_surface().nodes, model.tool_surface().node_normals),
+      edge_pass_(model.tool_surface().triangles, model.tool().mesh().nodes_m, model.obstacle_edge_nodes(),
+                 model.obstacle_edge_normals()) {
   solver = model.scene().solver;
   parameters = model.scene().solver_parameters;
-  collision_.activation_gap_m = model.scene().activation_gap_m;
-  // A tool node predicted deep inside the obstacle (a large device increment, or a step whose
-  // solve failed) must still find the face it went through, or the tool would pass through
-  // for good; beyond half the thickness it would face the opposite side instead.
-  collision_.max_penetration_m = 0.45 * model.obstacle_thickness_m();
+  // A *new* contact deeper than about half a body's thickness would face that body's far
+  // side; persistent contacts keep their face at any depth (ContactDetector), so a deep press
+  // or a failed step never lets the tool pass through.
+  tool_pass_parameters_.activation_gap_m = model.scene().activation_gap_m;
+  tool_pass_parameters_.max_penetration_m = 0.45 * model.obstacle_thickness_m();
+  edge_pass_parameters_.activation_gap_m = model.scene().activation_gap_m;
+  edge_pass_parameters_.max_penetration_m = 0.45 * model.tool_thickness_m();
+
+  const std::size_t n_tool = tool_surface_.nodes.size();
+  const std::size_t n_obstacle = obstacle_surface_.nodes.size();
+  const std::size_t n_edge = model.obstacle_edge_nodes().size();
   // Every workspace of the haptic path is sized here for the most contacts the scene can have
-  // (one per tool candidate node), so Step allocates only when m changes (W, ũ, μ).
-  max_contacts_ = static_cast<int>(model.tool_candidates().size());
+  // (one per tool surface node and per obstacle edge node), so Step allocates only when the
+  // contact count changes (W, ũ, μ).
+  max_contacts_ = static_cast<int>(n_tool + n_edge);
   contacts_.reserve(static_cast<std::size_t>(max_contacts_));
+  tool_pass_points_.reserve(n_tool);
+  edge_pass_points_.reserve(n_edge);
   workspace_.Reserve(max_contacts_, parameters.max_iterations);
   result_.Reserve(max_contacts_, parameters.max_iterations);
-  obstacle_slots_.resize(static_cast<std::size_t>(max_contacts_));
-  world_forces_n_.resize(3 * max_contacts_);
-  if (mode_ == SolveMode::kPrecomputed) {
-    const auto num_candidates = static_cast<Eigen::Index>(model.obstacle_candidates().size());
-    spread_.resize(3 * num_candidates, 3 * max_contacts_);
-    obstacle_force_n_.resize(3 * num_candidates);
-    slot_loaded_.assign(static_cast<std::size_t>(num_candidates), 0);
-    active_slots_.reserve(static_cast<std::size_t>(num_candidates));
+  region_.reserve(n_obstacle);
+  tool_loaded_.reserve(n_tool);
+  previous_ids_.reserve(static_cast<std::size_t>(max_contacts_));
+  obstacle_loaded_.reserve(n_obstacle);
+  edge_node_slot_.resize(n_edge);
+  for (std::size_t e = 0; e < n_edge; ++e) {
+    edge_node_slot_[e] = obstacle_surface_.node_index[static_cast<std::size_t>(model.obstacle_edge_nodes()[e])];
   }
+  identity_tool_rows_ = Identity(n_tool);
+  identity_obstacle_rows_ = Identity(n_obstacle);
   Reset();
 }
 
 void TwoBodySession::Reset() {
+  const auto n_tool = tool_surface_.nodes.size();
+  const auto n_obstacle = obstacle_surface_.nodes.size();
   device_translation_m_.setZero();
-  obstacle_candidate_displacement_m_ =
-      Eigen::VectorXd::Zero(3 * static_cast<Eigen::Index>(model_.obstacle_candidates().size()));
-  tool_candidate_displacement_m_ =
-      Eigen::VectorXd::Zero(3 * static_cast<Eigen::Index>(model_.tool_candidates().size()));
-  tool_candidate_force_n_ = Eigen::VectorXd::Zero(tool_candidate_displacement_m_.size());
-  tool_free_candidate_m_ = Eigen::VectorXd::Zero(tool_candidate_displacement_m_.size());
+  tool_displacement_m_ = Eigen::VectorXd::Zero(3 * static_cast<Eigen::Index>(n_tool));
+  tool_free_m_ = tool_displacement_m_;
+  obstacle_displacement_m_ = Eigen::VectorXd::Zero(3 * static_cast<Eigen::Index>(n_obstacle));
+  tool_slot_force_n_ = tool_displacement_m_;
+  obstacle_slot_force_n_ = obstacle_displacement_m_;
+  tool_slot_loaded_.assign(n_tool, 0);
+  obstacle_slot_loaded_.assign(n_obstacle, 0);
+  tool_is_slave_.assign(n_tool, 0);
+  previous_ids_.clear();
+  tool_loaded_.clear();
+  obstacle_loaded_.clear();
   obstacle_positions_m_ = model_.obstacle().mesh().nodes_m;
   tool_positions_m_ = model_.tool().mesh().nodes_m;
+  region_.clear();
+  in_region_.assign(n_obstacle, mode_ == SolveMode::kFullSolve ? 1 : 0);
+  obstacle_triangle_enabled_.assign(obstacle_surface_.triangles.size(), 1);
+  edge_node_enabled_.assign(edge_node_slot_.size(), 1);
+  tool_previous_triangle_.assign(n_tool, -1);
+  edge_previous_triangle_.assign(edge_node_slot_.size(), -1);
+  last_residual_penetration_m_ = 0.0;
   contacts_.clear();
+  force_by_id_n_ = Eigen::VectorXd::Zero(3 * (model_.tool().mesh().num_nodes() + model_.obstacle().mesh().num_nodes()));
   output_ = StepOutput{};
-  active_obstacle_map_.assign(static_cast<std::size_t>(model_.obstacle().mesh().num_nodes()), -1);
-  active_tool_map_.assign(static_cast<std::size_t>(model_.tool().mesh().num_nodes()), -1);
+  active_tool_rows_.assign(n_tool, -1);
+  active_obstacle_rows_.assign(n_obstacle, -1);
+  active_tool_.clear();
+  active_obstacle_.clear();
+}
+
+void TwoBodySession::BroadPhase(const Eigen::Vector3d& increment_m) {
+  // Predicted tool surface: last displacement plus the rigid increment of the device.
+  const auto& tool_nodes = tool_surface_.nodes;
+  const auto& tool_reference = model_.tool().mesh().nodes_m;
+  const Eigen::MatrixXd& unit_fields = model_.tool_unit_fields();
+  Eigen::Vector3d lo = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity());
+  Eigen::Vector3d hi = -lo;
+  for (int i = 0; i < static_cast<int>(tool_nodes.size()); ++i) {
+    const int node = tool_nodes[static_cast<std::size_t>(i)];
+    const Eigen::Vector3d x = tool_reference.row(node).transpose() + Block(tool_displacement_m_, i) +
+                              unit_fields.middleRows<3>(3 * i) * increment_m;
+    tool_positions_m_.row(node) = x.transpose();
+    lo = lo.cwiseMin(x);
+    hi = hi.cwiseMax(x);
+  }
+
+  const auto& obstacle_nodes = obstacle_surface_.nodes;
+  const auto& obstacle_reference = model_.obstacle().mesh().nodes_m;
+  if (mode_ == SolveMode::kFullSolve) {
+    // The full fields are known everywhere: every face and edge node stays enabled.
+    for (int i = 0; i < static_cast<int>(obstacle_nodes.size()); ++i) {
+      const int node = obstacle_nodes[static_cast<std::size_t>(i)];
+      obstacle_positions_m_.row(node) = obstacle_reference.row(node) + Block(obstacle_displacement_m_, i).transpose();
+    }
+    output_.region_nodes = static_cast<int>(obstacle_nodes.size());
+    return;
+  }
+
+  // Region: no surface node moved farther than Σ_j bound_j |f_j| under the last forces; a
+  // face can hold a tool node only within the activation gap or the step's penetration.
+  double moved_bound_m = 0.0;
+  for (int slot : obstacle_loaded_) {
+    moved_bound_m += obstacle_surface_.displacement_bound_m_per_n[static_cast<std::size_t>(slot)] *
+                     Block(obstacle_slot_force_n_, slot).norm();
+  }
+  const double margin_m = moved_bound_m + tool_pass_parameters_.activation_gap_m + increment_m.norm() +
+                          last_residual_penetration_m_ + obstacle_surface_.longest_edge_m;
+  lo.array() -= margin_m;
+  hi.array() += margin_m;
+  for (int slot : region_) in_region_[static_cast<std::size_t>(slot)] = 0;
+  region_.clear();
+  for (int i = 0; i < static_cast<int>(obstacle_nodes.size()); ++i) {
+    const auto x = obstacle_reference.row(obstacle_nodes[static_cast<std::size_t>(i)]);
+    if (x(0) >= lo(0) && x(0) <= hi(0) && x(1) >= lo(1) && x(1) <= hi(1) && x(2) >= lo(2) && x(2) <= hi(2)) {
+      region_.push_back(i);
+      in_region_[static_cast<std::size_t>(i)] = 1;
+    }
+  }
+  // U = C f on the region only (algorithms.md §5): the last step's loaded slots.
+  const Eigen::MatrixXd& compliance = obstacle_surface_.compliance_m_per_n;
+  for (int i : region_) obstacle_displacement_m_.segment<3>(3 * i).setZero();
+  for (int j : obstacle_loaded_) {
+    const Eigen::Vector3d f = Block(obstacle_slot_force_n_, j);
+    for (int i : region_) {
+      obstacle_displacement_m_.segment<3>(3 * i).noalias() += compliance.block<3, 3>(3 * i, 3 * j) * f;
+    }
+  }
+  for (int i : region_) {
+    const int node = obstacle_nodes[static_cast<std::size_t>(i)];
+    obstacle_positions_m_.row(node) = obstacle_reference.row(node) + Block(obstacle_displacement_m_, i).transpose();
+  }
+  const auto& triangles = obstacle_surface_.triangles;
+  for (std::size_t t = 0; t < triangles.size(); ++t) {
+    bool enabled = true;
+    for (int corner : triangles[t].corners) {
+      enabled = enabled && in_region_[static_cast<std::size_t>(obstacle_surface_.node_index[static_cast<std::size_t>(corner)])];
+    }
+    obstacle_triangle_enabled_[t] = enabled ? 1 : 0;
+  }
+  for (std::size_t e = 0; e < edge_node_slot_.size(); ++e) {
+    edge_node_enabled_[e] = in_region_[static_cast<std::size_t>(edge_node_slot_[e])];
+  }
+  output_.region_nodes = static_cast<int>(region_.size());
+}
+
+void TwoBodySession::DetectContacts() {
+  tool_pass_.Detect(obstacle_positions_m_, tool_positions_m_, tool_pass_parameters_, &tool_pass_points_,
+                    {&tool_previous_triangle_, &obstacle_triangle_enabled_, nullptr});
+  edge_pass_.Detect(tool_positions_m_, obstacle_positions_m_, edge_pass_parameters_, &edge_pass_points_,
+                    {&edge_previous_triangle_, nullptr, &edge_node_enabled_});
+  std::fill(tool_previous_triangle_.begin(), tool_previous_triangle_.end(), -1);
+  std::fill(edge_previous_triangle_.begin(), edge_previous_triangle_.end(), -1);
+  contacts_.clear();
+  const auto& obstacle_index = obstacle_surface_.node_index;
+  const auto& tool_index = tool_surface_.node_index;
+  for (const ContactPoint& p : tool_pass_points_) {
+    tool_previous_triangle_[static_cast<std::size_t>(p.node_slot)] = p.obstacle_triangle;
+    StepContact& c = contacts_.emplace_back();
+    c.pass = ContactPass::kToolNode;
+    c.id = p.tool_node;
+    c.slave_node = p.tool_node;
+    c.master_triangle = p.obstacle_triangle;
+    c.frame = obstacle_surface_.triangle_frames[static_cast<std::size_t>(p.obstacle_triangle)];
+    c.num_tool = 1;
+    c.tool_slots[0] = p.node_slot;
+    c.tool_coefficients[0] = 1.0;
+    c.num_obstacle = p.num_obstacle_nodes;
+    for (int k = 0; k < p.num_obstacle_nodes; ++k) {
+      c.obstacle_slots[static_cast<std::size_t>(k)] = obstacle_index[static_cast<std::size_t>(p.obstacle_nodes[static_cast<std::size_t>(k)])];
+      c.obstacle_coefficients[static_cast<std::size_t>(k)] = -p.weights[static_cast<std::size_t>(k)];
+    }
+    c.obstacle_point_m = p.obstacle_point_m;
+    c.predicted_gap_m = p.gap_m;
+    tool_is_slave_[static_cast<std::size_t>(p.node_slot)] = 1;
+  }
+  const int tool_node_count = model_.tool().mesh().num_nodes();
+  for (const ContactPoint& p : edge_pass_points_) {
+    edge_previous_triangle_[static_cast<std::size_t>(p.node_slot)] = p.obstacle_triangle;
+    const auto triangle = static_cast<std::size_t>(p.obstacle_triangle);
+    const fem::SurfaceTriangle& face = tool_surface_.triangles[triangle];
+    // On a sharp edge of the tool, or on a tool node in contact: pass 1 already has it.
+    bool covered = false;
+    for (int k = 0; k < 3; ++k) {
+      covered = covered || (tool_surface_.sharp_edges[triangle][static_cast<std::size_t>(k)] && p.barycentric[(k + 2) % 3] < kOnEdge);
+    }
+    int corner = 0;
+    if (p.barycentric.maxCoeff(&corner) > 1.0 - kOnEdge) {
+      covered = covered || tool_is_slave_[static_cast<std::size_t>(tool_index[static_cast<std::size_t>(face.corners[static_cast<std::size_t>(corner)])])];
+    }
+    if (covered) continue;
+    StepContact& c = contacts_.emplace_back();
+    c.pass = ContactPass::kObstacleNode;
+    c.id = tool_node_count + p.tool_node;
+    c.slave_node = p.tool_node;
+    c.master_triangle = p.obstacle_triangle;
+    c.frame = tool_surface_.triangle_frames[triangle];
+    c.num_obstacle = 1;
+    c.obstacle_slots[0] = edge_node_slot_[static_cast<std::size_t>(p.node_slot)];
+    c.obstacle_coefficients[0] = 1.0;
+    c.num_tool = p.num_obstacle_nodes;
+    for (int k = 0; k < p.num_obstacle_nodes; ++k) {
+      c.tool_slots[static_cast<std::size_t>(k)] = tool_index[static_cast<std::size_t>(p.obstacle_nodes[static_cast<std::size_t>(k)])];
+      c.tool_coefficients[static_cast<std::size_t>(k)] = -p.weights[static_cast<std::size_t>(k)];
+    }
+    c.obstacle_point_m = obstacle_positions_m_.row(p.tool_node).transpose();
+    c.predicted_gap_m = p.gap_m;
+    ++output_.num_edge_contacts;
+  }
+  for (const ContactPoint& p : tool_pass_points_) tool_is_slave_[static_cast<std::size_t>(p.node_slot)] = 0;
 }
 
 const StepOutput& TwoBodySession::Step(const Eigen::Vector3d& device_translation_m) {
@@ -70,29 +252,10 @@ const StepOutput& TwoBodySession::Step(const Eigen::Vector3d& device_translation
   output_.step = step;
   output_.device_translation_m = device_translation_m;
 
-  // 1. Collision detection on the predicted configuration: last displacement plus the rigid
-  //    increment of the device for the tool.
+  // 1. Broad phase and both detection passes on the predicted configuration.
   Stopwatch watch;
-  const Eigen::Vector3d increment_m = device_translation_m - device_translation_m_;
-  const auto& tool_nodes = model_.tool_candidates();
-  const auto& obstacle_nodes = model_.obstacle_candidates();
-  const Eigen::MatrixXd& unit_fields = model_.tool_unit_fields();
-  for (int i = 0; i < static_cast<int>(tool_nodes.size()); ++i) {
-    tool_positions_m_.row(tool_nodes[i]) =
-        (model_.tool().mesh().nodes_m.row(tool_nodes[i]).transpose() +
-         Block(tool_candidate_displacement_m_, i) + unit_fields.middleRows<3>(3 * i) * increment_m)
-            .transpose();
-  }
-  for (int i = 0; i < static_cast<int>(obstacle_nodes.size()); ++i) {
-    obstacle_positions_m_.row(obstacle_nodes[i]) =
-        (model_.obstacle().mesh().nodes_m.row(obstacle_nodes[i]).transpose() +
-         Block(obstacle_candidate_displacement_m_, i))
-            .transpose();
-  }
-  detector_.Detect(obstacle_positions_m_, tool_positions_m_, collision_, &contacts_);
-  for (ContactPoint& contact : contacts_) {
-    contact.frame = model_.obstacle_reference_frames()[static_cast<std::size_t>(contact.obstacle_triangle)];
-  }
+  BroadPhase(device_translation_m - device_translation_m_);
+  DetectContacts();
   device_translation_m_ = device_translation_m;
   output_.num_contacts = static_cast<int>(contacts_.size());
   output_.detect_seconds = watch.ElapsedSeconds();
@@ -101,50 +264,51 @@ const StepOutput& TwoBodySession::Step(const Eigen::Vector3d& device_translation
   //    (algorithms.md §6); the full-solve mode solves for it instead.
   watch.Restart();
   if (mode_ == SolveMode::kPrecomputed) {
-    tool_free_candidate_m_.noalias() = unit_fields * device_translation_m_;
-    AssembleProblem(model_.tool_compliance_m_per_n(), model_.tool_candidate_index(),
-                    model_.obstacle_compliance_m_per_n(), model_.obstacle_candidate_index());
+    tool_free_m_.noalias() = model_.tool_unit_fields() * device_translation_m_;
+    AssembleProblem(tool_surface_.compliance_m_per_n, identity_tool_rows_, obstacle_surface_.compliance_m_per_n,
+                    identity_obstacle_rows_);
   } else {
     // The paper's way: compliance columns of the active nodes solved with the factors now.
-    for (int node : active_obstacle_nodes_) active_obstacle_map_[static_cast<std::size_t>(node)] = -1;
-    for (int node : active_tool_nodes_) active_tool_map_[static_cast<std::size_t>(node)] = -1;
-    active_obstacle_nodes_.clear();
-    active_tool_nodes_.clear();
-    for (const ContactPoint& contact : contacts_) {
-      active_tool_nodes_.push_back(contact.tool_node);
-      for (int k = 0; k < contact.num_obstacle_nodes; ++k) {
-        active_obstacle_nodes_.push_back(contact.obstacle_nodes[static_cast<std::size_t>(k)]);
-      }
+    for (int slot : active_tool_) active_tool_rows_[static_cast<std::size_t>(slot)] = -1;
+    for (int slot : active_obstacle_) active_obstacle_rows_[static_cast<std::size_t>(slot)] = -1;
+    active_tool_.clear();
+    active_obstacle_.clear();
+    for (const StepContact& c : contacts_) {
+      for (int k = 0; k < c.num_tool; ++k) active_tool_.push_back(c.tool_slots[static_cast<std::size_t>(k)]);
+      for (int k = 0; k < c.num_obstacle; ++k) active_obstacle_.push_back(c.obstacle_slots[static_cast<std::size_t>(k)]);
     }
-    for (auto* nodes : {&active_obstacle_nodes_, &active_tool_nodes_}) {
-      std::sort(nodes->begin(), nodes->end());
-      nodes->erase(std::unique(nodes->begin(), nodes->end()), nodes->end());
+    std::vector<int> tool_nodes, obstacle_nodes;
+    for (auto* slots : {&active_tool_, &active_obstacle_}) {
+      std::sort(slots->begin(), slots->end());
+      slots->erase(std::unique(slots->begin(), slots->end()), slots->end());
     }
-    for (int i = 0; i < static_cast<int>(active_obstacle_nodes_.size()); ++i) {
-      active_obstacle_map_[static_cast<std::size_t>(active_obstacle_nodes_[i])] = i;
+    for (int i = 0; i < static_cast<int>(active_tool_.size()); ++i) {
+      active_tool_rows_[static_cast<std::size_t>(active_tool_[static_cast<std::size_t>(i)])] = i;
+      tool_nodes.push_back(tool_surface_.nodes[static_cast<std::size_t>(active_tool_[static_cast<std::size_t>(i)])]);
     }
-    for (int i = 0; i < static_cast<int>(active_tool_nodes_.size()); ++i) {
-      active_tool_map_[static_cast<std::size_t>(active_tool_nodes_[i])] = i;
+    for (int i = 0; i < static_cast<int>(active_obstacle_.size()); ++i) {
+      active_obstacle_rows_[static_cast<std::size_t>(active_obstacle_[static_cast<std::size_t>(i)])] = i;
+      obstacle_nodes.push_back(obstacle_surface_.nodes[static_cast<std::size_t>(active_obstacle_[static_cast<std::size_t>(i)])]);
     }
     const Eigen::VectorXd free_m = model_.tool().SolveDisplacement(
         Eigen::VectorXd::Zero(model_.tool().num_dofs()), device_translation_m_);
-    for (int i = 0; i < static_cast<int>(tool_nodes.size()); ++i) {
-      tool_free_candidate_m_.segment<3>(3 * i) = free_m.segment<3>(3 * tool_nodes[i]);
+    for (int i = 0; i < static_cast<int>(tool_surface_.nodes.size()); ++i) {
+      tool_free_m_.segment<3>(3 * i) = free_m.segment<3>(3 * tool_surface_.nodes[static_cast<std::size_t>(i)]);
     }
-    const Eigen::MatrixXd tool_block = model_.tool().ComplianceBlock(active_tool_nodes_);
-    const Eigen::MatrixXd obstacle_block = model_.obstacle().ComplianceBlock(active_obstacle_nodes_);
-    AssembleProblem(tool_block, active_tool_map_, obstacle_block, active_obstacle_map_);
+    const Eigen::MatrixXd tool_block = model_.tool().ComplianceBlock(tool_nodes);
+    const Eigen::MatrixXd obstacle_block = model_.obstacle().ComplianceBlock(obstacle_nodes);
+    AssembleProblem(tool_block, active_tool_rows_, obstacle_block, active_obstacle_rows_);
   }
   output_.assemble_seconds = watch.ElapsedSeconds();
 
-  // 3. Solve, warm-started from the last forces of the same tool nodes.
+  // 3. Solve, warm-started from the last forces of the same contacts.
   watch.Restart();
   const int m = static_cast<int>(contacts_.size());
   if (m > 0) {
     result_.force_n.resize(3 * m);
     for (int alpha = 0; alpha < m; ++alpha) {
-      const int index = model_.tool_candidate_index()[static_cast<std::size_t>(contacts_[alpha].tool_node)];
-      result_.force_n.segment<3>(3 * alpha) = contacts_[alpha].frame * Block(tool_candidate_force_n_, index);
+      const StepContact& c = contacts_[static_cast<std::size_t>(alpha)];
+      result_.force_n.segment<3>(3 * alpha) = c.frame * Block(force_by_id_n_, c.id);
     }
     contact::Solve(solver, problem_, parameters, &workspace_, &result_);
     const contact::SolverStats& stats = result_.stats;
@@ -160,14 +324,39 @@ const StepOutput& TwoBodySession::Step(const Eigen::Vector3d& device_translation
   }
   output_.solve_seconds = watch.ElapsedSeconds();
 
-  // 4. Forces back to the bodies (algorithms.md §5).
+  // 4. Forces back to the bodies (algorithms.md §5): node p carries c_p Rᵀ r.
   watch.Restart();
-  tool_candidate_force_n_.setZero();
+  for (int slot : tool_loaded_) tool_slot_loaded_[static_cast<std::size_t>(slot)] = 0;
+  for (int slot : obstacle_loaded_) obstacle_slot_loaded_[static_cast<std::size_t>(slot)] = 0;
+  tool_loaded_.clear();
+  obstacle_loaded_.clear();
+  last_residual_penetration_m_ = 0.0;
+  for (int id : previous_ids_) force_by_id_n_.segment<3>(3 * id).setZero();
+  previous_ids_.clear();
+  auto load = [](int slot, const Eigen::Vector3d& f, std::vector<char>* loaded, std::vector<int>* list,
+                 Eigen::VectorXd* forces) {
+    if (!(*loaded)[static_cast<std::size_t>(slot)]) {
+      (*loaded)[static_cast<std::size_t>(slot)] = 1;
+      list->push_back(slot);
+      forces->segment<3>(3 * slot).setZero();
+    }
+    forces->segment<3>(3 * slot) += f;
+  };
   for (int alpha = 0; alpha < m; ++alpha) {
-    const Eigen::Vector3d world_n = contacts_[alpha].frame.transpose() * result_.force_n.segment<3>(3 * alpha);
-    const int index = model_.tool_candidate_index()[static_cast<std::size_t>(contacts_[alpha].tool_node)];
-    tool_candidate_force_n_.segment<3>(3 * index) = world_n;
-    output_.contact_force_n += world_n;
+    const StepContact& c = contacts_[static_cast<std::size_t>(alpha)];
+    const Eigen::Vector3d world_n = c.frame.transpose() * result_.force_n.segment<3>(3 * alpha);
+    force_by_id_n_.segment<3>(3 * c.id) = world_n;
+    previous_ids_.push_back(c.id);
+    for (int k = 0; k < c.num_tool; ++k) {
+      const Eigen::Vector3d f = c.tool_coefficients[static_cast<std::size_t>(k)] * world_n;
+      load(c.tool_slots[static_cast<std::size_t>(k)], f, &tool_slot_loaded_, &tool_loaded_, &tool_slot_force_n_);
+      output_.contact_force_n += f;
+    }
+    for (int k = 0; k < c.num_obstacle; ++k) {
+      load(c.obstacle_slots[static_cast<std::size_t>(k)], c.obstacle_coefficients[static_cast<std::size_t>(k)] * world_n,
+           &obstacle_slot_loaded_, &obstacle_loaded_, &obstacle_slot_force_n_);
+    }
+    last_residual_penetration_m_ = std::max(last_residual_penetration_m_, -result_.displacement_m[3 * alpha]);
   }
   output_.device_force_n = model_.scene().force_gain * output_.contact_force_n;
   if (mode_ == SolveMode::kPrecomputed) {
@@ -180,10 +369,9 @@ const StepOutput& TwoBodySession::Step(const Eigen::Vector3d& device_translation
   return output_;
 }
 
-void TwoBodySession::AssembleProblem(const Eigen::MatrixXd& tool_compliance,
-                                     const std::vector<int>& tool_map,
+void TwoBodySession::AssembleProblem(const Eigen::MatrixXd& tool_compliance, const std::vector<int>& tool_rows,
                                      const Eigen::MatrixXd& obstacle_compliance,
-                                     const std::vector<int>& obstacle_map) {
+                                     const std::vector<int>& obstacle_rows) {
   const int m = static_cast<int>(contacts_.size());
   // Same-size resizes are free in Eigen: the 1 kHz path allocates only when m changes.
   problem_.flexibility_m_per_n.resize(3 * m, 3 * m);
@@ -191,91 +379,53 @@ void TwoBodySession::AssembleProblem(const Eigen::MatrixXd& tool_compliance,
   problem_.friction_coefficient.setConstant(m, model_.scene().friction_coefficient);
   const auto& tool_reference = model_.tool().mesh().nodes_m;
   const auto& obstacle_reference = model_.obstacle().mesh().nodes_m;
-  const auto& tool_index = model_.tool_candidate_index();
-  const auto& obstacle_index = model_.obstacle_candidate_index();
-  // Two exact ways to gather the obstacle part of W (same sums, different order), chosen per
-  // step by their multiply-add counts (n = obstacle nodes per contact, R = rows of C):
-  //   spread: S_β = Σ_l w_βl C_obstacle(:, j_l) for every contact (n·R·3 per contact; three
-  //           adjacent columns of a column-major matrix are one contiguous run, so these are
-  //           vectorised axpys), then W_obs(α, β) = Σ_k w_αk S_β(i_k, :): n blocks per pair.
-  //           S is reused by the update (U_obstacle = −Σ_β S_β f_β, 3m·R).
-  //   pairs:  W_obs(α, β) = Σ_k Σ_l w_αk w_βl C(i_k, j_l): n² blocks per pair, and the update
-  //           from the compliance columns of the loaded nodes only (3·R per active node).
-  // The spread wins for many contacts (81 on a Tet10 tool: 1.4x), the pairs for few (25).
   for (int alpha = 0; alpha < m; ++alpha) {
-    const ContactPoint& a = contacts_[alpha];
-    std::array<int, 6>& slots = obstacle_slots_[static_cast<std::size_t>(alpha)];
-    for (int k = 0; k < a.num_obstacle_nodes; ++k) {
-      slots[static_cast<std::size_t>(k)] =
-          obstacle_map[static_cast<std::size_t>(a.obstacle_nodes[static_cast<std::size_t>(k)])];
-    }
-  }
-  const double rows = static_cast<double>(obstacle_compliance.rows());
-  const double n = m > 0 ? static_cast<double>(contacts_[0].num_obstacle_nodes) : 0.0;
-  const double md = static_cast<double>(m);
-  const double spread_cost = md * n * rows * 3 + md * n * 9 * (md + 1) / 2 + 3 * md * rows;
-  const double pairs_cost = n * n * 9 * md * (md + 1) / 2 + std::min(md * n, rows / 3) * 3 * rows;
-  use_spread_ = spread_cost < pairs_cost;
-  if (use_spread_) {
-    const Eigen::Index spread_rows = obstacle_compliance.rows();
-    if (spread_.rows() != spread_rows || spread_.cols() < 3 * m) {
-      spread_.resize(spread_rows, std::max<Eigen::Index>(3 * m, 3 * max_contacts_));
-    }
-    for (int alpha = 0; alpha < m; ++alpha) {
-      const ContactPoint& a = contacts_[alpha];
-      const std::array<int, 6>& slots = obstacle_slots_[static_cast<std::size_t>(alpha)];
-      auto spread = spread_.middleCols<3>(3 * alpha);
-      spread.noalias() = a.weights[0] * obstacle_compliance.middleCols<3>(3 * slots[0]);
-      for (int k = 1; k < a.num_obstacle_nodes; ++k) {
-        spread.noalias() += a.weights[static_cast<std::size_t>(k)] *
-                            obstacle_compliance.middleCols<3>(3 * slots[static_cast<std::size_t>(k)]);
-      }
-    }
-  }
-
-  for (int alpha = 0; alpha < m; ++alpha) {
-    const ContactPoint& a = contacts_[alpha];
-    const int ia = tool_index[static_cast<std::size_t>(a.tool_node)];
-    const Eigen::Vector3d free_m = Block(tool_free_candidate_m_, ia);
-    Eigen::Vector3d obstacle_point_m = Eigen::Vector3d::Zero();
-    Eigen::Vector3d obstacle_previous_m = Eigen::Vector3d::Zero();
-    for (int k = 0; k < a.num_obstacle_nodes; ++k) {
-      const int node = a.obstacle_nodes[static_cast<std::size_t>(k)];
-      const double w = a.weights[static_cast<std::size_t>(k)];
-      obstacle_point_m += w * obstacle_reference.row(node).transpose();
-      obstacle_previous_m += w * Block(obstacle_candidate_displacement_m_, obstacle_index[static_cast<std::size_t>(node)]);
-    }
+    const StepContact& a = contacts_[static_cast<std::size_t>(alpha)];
     // Signorini on the total gap, Coulomb on the slip increment (algorithms.md §2).
-    const Eigen::Vector3d total_m = tool_reference.row(a.tool_node).transpose() + free_m - obstacle_point_m;
-    const Eigen::Vector3d increment_m = free_m - Block(tool_candidate_displacement_m_, ia) + obstacle_previous_m;
+    Eigen::Vector3d total_m = Eigen::Vector3d::Zero(), increment_m = Eigen::Vector3d::Zero();
+    for (int k = 0; k < a.num_tool; ++k) {
+      const int slot = a.tool_slots[static_cast<std::size_t>(k)];
+      const double c = a.tool_coefficients[static_cast<std::size_t>(k)];
+      const Eigen::Vector3d free_m = Block(tool_free_m_, slot);
+      total_m += c * (tool_reference.row(tool_surface_.nodes[static_cast<std::size_t>(slot)]).transpose() + free_m);
+      increment_m += c * (free_m - Block(tool_displacement_m_, slot));
+    }
+    for (int k = 0; k < a.num_obstacle; ++k) {
+      const int slot = a.obstacle_slots[static_cast<std::size_t>(k)];
+      const double c = a.obstacle_coefficients[static_cast<std::size_t>(k)];
+      total_m += c * obstacle_reference.row(obstacle_surface_.nodes[static_cast<std::size_t>(slot)]).transpose();
+      increment_m -= c * Block(obstacle_displacement_m_, slot);
+    }
     problem_.free_displacement_m[3 * alpha] = a.frame.row(0).dot(total_m);
     problem_.free_displacement_m.segment<2>(3 * alpha + 1) = a.frame.bottomRows<2>() * increment_m;
 
-    // W_αβ = R_α [C_tool(a, b) + Σ_k w_αk S_β(i_k, :)] R_βᵀ; W is symmetric, so β ≥ α only.
-    const std::array<int, 6>& slots = obstacle_slots_[static_cast<std::size_t>(alpha)];
-    const int ta = tool_map[static_cast<std::size_t>(a.tool_node)];
+    // W_αβ = R_α [Σ_pq c_αp c_βq C(p, q)] R_βᵀ over both bodies; W is symmetric, so β ≥ α.
     for (int beta = alpha; beta < m; ++beta) {
-      const ContactPoint& b = contacts_[beta];
-      const int tb = tool_map[static_cast<std::size_t>(b.tool_node)];
-      Eigen::Matrix3d world = tool_compliance.block<3, 3>(3 * ta, 3 * tb);
-      if (use_spread_) {
-        for (int k = 0; k < a.num_obstacle_nodes; ++k) {
-          world.noalias() += a.weights[static_cast<std::size_t>(k)] *
-                             spread_.block<3, 3>(3 * slots[static_cast<std::size_t>(k)], 3 * beta);
+      const StepContact& b = contacts_[static_cast<std::size_t>(beta)];
+      Eigen::Matrix3d world = Eigen::Matrix3d::Zero();
+      for (int k = 0; k < a.num_tool; ++k) {
+        const int row = 3 * tool_rows[static_cast<std::size_t>(a.tool_slots[static_cast<std::size_t>(k)])];
+        Eigen::Matrix3d sum = Eigen::Matrix3d::Zero();
+        for (int l = 0; l < b.num_tool; ++l) {
+          sum.noalias() += b.tool_coefficients[static_cast<std::size_t>(l)] *
+                           tool_compliance.block<3, 3>(row, 3 * tool_rows[static_cast<std::size_t>(b.tool_slots[static_cast<std::size_t>(l)])]);
         }
-      } else {
-        const std::array<int, 6>& other = obstacle_slots_[static_cast<std::size_t>(beta)];
-        for (int k = 0; k < a.num_obstacle_nodes; ++k) {
-          Eigen::Matrix3d row_sum = b.weights[0] * obstacle_compliance.block<3, 3>(3 * slots[static_cast<std::size_t>(k)], 3 * other[0]);
-          for (int l = 1; l < b.num_obstacle_nodes; ++l) {
-            row_sum.noalias() += b.weights[static_cast<std::size_t>(l)] *
-                                 obstacle_compliance.block<3, 3>(3 * slots[static_cast<std::size_t>(k)],
-                                                                 3 * other[static_cast<std::size_t>(l)]);
-          }
-          world.noalias() += a.weights[static_cast<std::size_t>(k)] * row_sum;
-        }
+        world.noalias() += a.tool_coefficients[static_cast<std::size_t>(k)] * sum;
       }
-      const Eigen::Matrix3d local = a.frame * world * b.frame.transpose();
+      for (int k = 0; k < a.num_obstacle; ++k) {
+        const int row = 3 * obstacle_rows[static_cast<std::size_t>(a.obstacle_slots[static_cast<std::size_t>(k)])];
+        Eigen::Matrix3d sum = Eigen::Matrix3d::Zero();
+        for (int l = 0; l < b.num_obstacle; ++l) {
+          sum.noalias() += b.obstacle_coefficients[static_cast<std::size_t>(l)] *
+                           obstacle_compliance.block<3, 3>(row, 3 * obstacle_rows[static_cast<std::size_t>(b.obstacle_slots[static_cast<std::size_t>(l)])]);
+        }
+        world.noalias() += a.obstacle_coefficients[static_cast<std::size_t>(k)] * sum;
+      }
+      Eigen::Matrix3d local = a.frame * world * b.frame.transpose();
+      if (beta == alpha && local(0, 0) < model_.rigid_contact_compliance_m_per_n()) {
+        // Rigid against rigid (both sides Dirichlet): see TwoBodyModel.
+        local.diagonal().array() += model_.rigid_contact_compliance_m_per_n();
+      }
       problem_.flexibility_m_per_n.block<3, 3>(3 * alpha, 3 * beta) = local;
       if (beta != alpha) problem_.flexibility_m_per_n.block<3, 3>(3 * beta, 3 * alpha) = local.transpose();
     }
@@ -283,64 +433,30 @@ void TwoBodySession::AssembleProblem(const Eigen::MatrixXd& tool_compliance,
 }
 
 void TwoBodySession::UpdatePrecomputed() {
-  // U = U_free(d) + C f over the candidate nodes (algorithms.md §5, §6). The obstacle carries
-  // −w_βl f_β at the nodes of contact β: with the spread, U_obstacle = −Σ_β S_β f_β (one
-  // matrix-vector product); otherwise the compliance columns of the loaded nodes only. The
-  // tool carries f_β at its node, so only its active compliance columns are touched. No
-  // allocation either way.
-  const int m = static_cast<int>(contacts_.size());
-  const auto& tool_index = model_.tool_candidate_index();
-  const Eigen::MatrixXd& tool_compliance = model_.tool_compliance_m_per_n();
-  tool_candidate_displacement_m_ = tool_free_candidate_m_;
-  if (m == 0) {
-    obstacle_candidate_displacement_m_.setZero();
-    return;
-  }
-  for (int alpha = 0; alpha < m; ++alpha) {
-    const int ia = tool_index[static_cast<std::size_t>(contacts_[alpha].tool_node)];
-    const Eigen::Vector3d world_n = Block(tool_candidate_force_n_, ia);
-    world_forces_n_.segment<3>(3 * alpha) = -world_n;
-    tool_candidate_displacement_m_.noalias() += tool_compliance.middleCols<3>(3 * ia) * world_n;
-  }
-  if (use_spread_) {
-    obstacle_candidate_displacement_m_.noalias() = spread_.leftCols(3 * m) * world_forces_n_.head(3 * m);
-    return;
-  }
-  // Nodal obstacle forces on the loaded nodes, then their compliance columns only.
-  const Eigen::MatrixXd& obstacle_compliance = model_.obstacle_compliance_m_per_n();
-  active_slots_.clear();
-  for (int alpha = 0; alpha < m; ++alpha) {
-    const ContactPoint& a = contacts_[alpha];
-    for (int k = 0; k < a.num_obstacle_nodes; ++k) {
-      const int slot = obstacle_slots_[static_cast<std::size_t>(alpha)][static_cast<std::size_t>(k)];
-      if (!slot_loaded_[static_cast<std::size_t>(slot)]) {
-        slot_loaded_[static_cast<std::size_t>(slot)] = 1;
-        active_slots_.push_back(slot);
-        obstacle_force_n_.segment<3>(3 * slot).setZero();
-      }
-      obstacle_force_n_.segment<3>(3 * slot) +=
-          a.weights[static_cast<std::size_t>(k)] * world_forces_n_.segment<3>(3 * alpha);
-    }
-  }
-  obstacle_candidate_displacement_m_.setZero();
-  for (int slot : active_slots_) {
-    obstacle_candidate_displacement_m_.noalias() +=
-        obstacle_compliance.middleCols<3>(3 * slot) * obstacle_force_n_.segment<3>(3 * slot);
-    slot_loaded_[static_cast<std::size_t>(slot)] = 0;
+  // U_tool = U_free(d) + C f over the tool surface (algorithms.md §5, §6), from the compliance
+  // columns of the loaded slots only. The obstacle's U is evaluated by the next broad phase on
+  // the region it needs, from the loaded slots kept here.
+  const Eigen::MatrixXd& tool_compliance = tool_surface_.compliance_m_per_n;
+  tool_displacement_m_ = tool_free_m_;
+  for (int slot : tool_loaded_) {
+    tool_displacement_m_.noalias() += tool_compliance.middleCols<3>(3 * slot) * Block(tool_slot_force_n_, slot);
   }
 }
 
 ContactSample TwoBodySession::SampleContact(int alpha) const {
   HAPCO_ASSERT(alpha >= 0 && alpha < static_cast<int>(contacts_.size()) && 3 * alpha + 3 <= result_.force_n.size(),
                "contact index out of range");
-  const ContactPoint& contact = contacts_[static_cast<std::size_t>(alpha)];
+  const StepContact& contact = contacts_[static_cast<std::size_t>(alpha)];
   const Eigen::Vector3d r = result_.force_n.segment<3>(3 * alpha);
   const Eigen::Vector3d u = result_.displacement_m.segment<3>(3 * alpha);
+  // r acts on the slave: the tool in pass 1, the obstacle in pass 2.
+  const double tool_sign = contact.pass == ContactPass::kToolNode ? 1.0 : -1.0;
   ContactSample sample;
-  sample.tool_node = contact.tool_node;
+  sample.tool_node = contact.id;
+  sample.pass = contact.pass;
   sample.position_m = contact.obstacle_point_m;
-  sample.normal = contact.frame.row(0).transpose();
-  sample.force_n = contact.frame.transpose() * r;
+  sample.normal = tool_sign * contact.frame.row(0).transpose();
+  sample.force_n = tool_sign * (contact.frame.transpose() * r);
   sample.gap_m = u[0];
   sample.slip_m = u.tail<2>().norm();
   const double tolerance_m = parameters.global_tolerance_m;
@@ -352,12 +468,15 @@ void TwoBodySession::NodalContactForces(Eigen::VectorXd* obstacle_n, Eigen::Vect
   *obstacle_n = Eigen::VectorXd::Zero(model_.obstacle().num_dofs());
   *tool_n = Eigen::VectorXd::Zero(model_.tool().num_dofs());
   for (int alpha = 0; alpha < static_cast<int>(contacts_.size()) && 3 * alpha < result_.force_n.size(); ++alpha) {
-    const ContactPoint& a = contacts_[alpha];
-    const Eigen::Vector3d world_n = a.frame.transpose() * result_.force_n.segment<3>(3 * alpha);
-    tool_n->segment<3>(3 * a.tool_node) += world_n;
-    for (int k = 0; k < a.num_obstacle_nodes; ++k) {
-      obstacle_n->segment<3>(3 * a.obstacle_nodes[static_cast<std::size_t>(k)]) -=
-          a.weights[static_cast<std::size_t>(k)] * world_n;
+    const StepContact& c = contacts_[static_cast<std::size_t>(alpha)];
+    const Eigen::Vector3d world_n = c.frame.transpose() * result_.force_n.segment<3>(3 * alpha);
+    for (int k = 0; k < c.num_tool; ++k) {
+      tool_n->segment<3>(3 * tool_surface_.nodes[static_cast<std::size_t>(c.tool_slots[static_cast<std::size_t>(k)])]) +=
+          c.tool_coefficients[static_cast<std::size_t>(k)] * world_n;
+    }
+    for (int k = 0; k < c.num_obstacle; ++k) {
+      obstacle_n->segment<3>(3 * obstacle_surface_.nodes[static_cast<std::size_t>(c.obstacle_slots[static_cast<std::size_t>(k)])]) +=
+          c.obstacle_coefficients[static_cast<std::size_t>(k)] * world_n;
     }
   }
 }
@@ -370,16 +489,16 @@ void TwoBodySession::FullDisplacements(Eigen::VectorXd* obstacle_m, Eigen::Vecto
 }
 
 void TwoBodySession::UpdateFullSolve() {
-  // The paper's per-step solves: full fields from the factors, then read the candidates.
+  // The paper's per-step solves: full fields from the factors, then read the surfaces.
   Eigen::VectorXd obstacle_m, tool_m;
   FullDisplacements(&obstacle_m, &tool_m);
-  const auto& obstacle_nodes = model_.obstacle_candidates();
-  const auto& tool_nodes = model_.tool_candidates();
+  const auto& obstacle_nodes = obstacle_surface_.nodes;
+  const auto& tool_nodes = tool_surface_.nodes;
   for (int i = 0; i < static_cast<int>(obstacle_nodes.size()); ++i) {
-    obstacle_candidate_displacement_m_.segment<3>(3 * i) = obstacle_m.segment<3>(3 * obstacle_nodes[i]);
+    obstacle_displacement_m_.segment<3>(3 * i) = obstacle_m.segment<3>(3 * obstacle_nodes[static_cast<std::size_t>(i)]);
   }
   for (int i = 0; i < static_cast<int>(tool_nodes.size()); ++i) {
-    tool_candidate_displacement_m_.segment<3>(3 * i) = tool_m.segment<3>(3 * tool_nodes[i]);
+    tool_displacement_m_.segment<3>(3 * i) = tool_m.segment<3>(3 * tool_nodes[static_cast<std::size_t>(i)]);
   }
 }
 

@@ -1,17 +1,30 @@
 #pragma once
 // One haptic step of the two-body contact simulation (algorithms.md §2, §5, §6):
-//   device translation d_k → collision detection → ũ and W for the active contacts →
-//   contact solve → contact forces, candidate displacements and the force on the device.
+//   device translation d_k → broad phase → two-pass collision detection → ũ and W for the
+//   active contacts → contact solve → contact forces, surface displacements and the force on
+//   the device.
+//
+// Two-pass node-to-face (docs/free-interaction.md): every tool surface node against the
+// obstacle faces (pass 1), and the obstacle's sharp-edge nodes against the tool faces
+// (pass 2), so an obstacle edge or corner pressing into a flat tool face is a contact too.
+// Each contact is a relative displacement g = Σ_p c_p x_p over the nodes of both bodies
+// (slave node c = +1, master face nodes c = −w, w the face's shape-function weights) in a
+// frame whose normal points from the master face towards the slave node.
 //
 // Incremental friction (algorithms.md §2): Signorini acts on the total gap, Coulomb on the
 // slip increment of the step, both evaluated with the current contact geometry:
-//   ũ_n = n·[(X_a + U_free,a(d_k)) − Σ w_i X_i]                       (total)
-//   ũ_t = T·[(U_free,a(d_k) − U_a,k−1) + Σ w_i U_i,k−1]                (increment)
-// where a is the tool node, i the obstacle face nodes with weights w, U_free the tool's
-// displacement for a rigid device translation with no contact force.
+//   ũ_n = n·Σ_p c_p (X_p + U_free,p(d_k))        (total)
+//   ũ_t = T·Σ_p c_p (U_free,p(d_k) − U_p,k−1)      (increment)
+// U_free is the tool's displacement for a rigid device translation with no contact force (0
+// on the obstacle).
+//
+// Broad phase: the obstacle's displacement U = C f is evaluated only on the surface nodes
+// near the tool's predicted box, grown by a bound on how far the last forces can have moved
+// any surface node (ContactSurface::displacement_bound_m_per_n) plus the step's travel, so a
+// step costs what the active contacts cost, not what the surface costs.
 //
 // Two modes give the same forces (a test checks 1e-9 relative):
-//   kPrecomputed: W gathered from the per-scene compliance blocks, U updated from them;
+//   kPrecomputed: W gathered from the per-scene compliance blocks, U from them;
 //                 the cost does not depend on the mesh size (algorithms.md §6).
 //   kFullSolve:   the paper's per-step sparse solves: compliance columns of the active nodes
 //                 and full displacement fields solved with the factors every step. The
@@ -30,6 +43,30 @@ namespace hapco::sim {
 
 enum class SolveMode { kPrecomputed, kFullSolve };
 
+// Which node pressed into which face.
+enum class ContactPass {
+  kToolNode,      // a tool surface node against an obstacle face (pass 1)
+  kObstacleNode,  // an obstacle sharp-edge node against a tool face (pass 2)
+};
+
+// One contact of a step, both sides as weighted surface nodes (slots into the bodies'
+// ContactSurface::nodes).
+struct StepContact {
+  ContactPass pass = ContactPass::kToolNode;
+  // Stable while the pair persists: the tool node id (pass 1), or tool node count + the
+  // obstacle node id (pass 2).
+  int id = -1;
+  int slave_node = -1;       // node id of the slave (tool node, or obstacle node)
+  int master_triangle = -1;  // index into the master surface's triangles
+  // Rows n, t1, t2 (world): n is the master face's reference normal, towards the slave.
+  Eigen::Matrix3d frame = Eigen::Matrix3d::Identity();
+  int num_tool = 0, num_obstacle = 0;
+  std::array<int, 6> tool_slots{}, obstacle_slots{};
+  std::array<double, 6> tool_coefficients{}, obstacle_coefficients{};  // dimensionless
+  Eigen::Vector3d obstacle_point_m = Eigen::Vector3d::Zero();  // obstacle side, predicted, m
+  double predicted_gap_m = 0.0;  // signed normal gap before the solve, m (< 0 penetrating)
+};
+
 struct StepOutput {
   int step = 0;                                                   // 1-based step count
   Eigen::Vector3d device_translation_m = Eigen::Vector3d::Zero();  // d_k, m
@@ -39,24 +76,27 @@ struct StepOutput {
   Eigen::Vector3d contact_force_n = Eigen::Vector3d::Zero();
   Eigen::Vector3d device_force_n = Eigen::Vector3d::Zero();  // force_gain × contact_force_n, N
   int num_contacts = 0;
+  int num_edge_contacts = 0;  // of which pass 2 (obstacle edge node on a tool face)
   std::array<int, 3> state_counts{0, 0, 0};  // separating, sticking, sliding
   contact::SolverStatus status = contact::SolverStatus::kConverged;
   int iterations = 0;
   int inner_iterations = 0;
   double paper_error_m = 0.0;
   double fc3d_error = 0.0;
-  double detect_seconds = 0.0;
+  int region_nodes = 0;           // obstacle surface nodes the broad phase kept
+  double detect_seconds = 0.0;    // broad phase (incl. the obstacle displacement there) + both passes
   double assemble_seconds = 0.0;  // ũ and W
   double solve_seconds = 0.0;
-  double update_seconds = 0.0;    // displacements of the candidate nodes
+  double update_seconds = 0.0;    // displacements of the tool surface
   double total_seconds = 0.0;
 };
 
 // One active contact after a step, in world axes (for recordings, DDS frames, VTK).
 struct ContactSample {
-  int tool_node = -1;                                        // stable while the pair persists
-  Eigen::Vector3d position_m = Eigen::Vector3d::Zero();      // obstacle point
-  Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();         // unit, towards the tool
+  int tool_node = -1;                                        // StepContact::id (stable)
+  ContactPass pass = ContactPass::kToolNode;
+  Eigen::Vector3d position_m = Eigen::Vector3d::Zero();      // obstacle-side point
+  Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();         // unit, from the obstacle towards the tool
   Eigen::Vector3d force_n = Eigen::Vector3d::Zero();         // contact force on the tool
   double gap_m = 0.0;                                        // u_n after the solve
   double slip_m = 0.0;                                       // ||u_t||, slip increment of the step
@@ -81,7 +121,7 @@ class TwoBodySession {
   contact::SolverParameters parameters;
 
   const StepOutput& last_output() const { return output_; }
-  const std::vector<ContactPoint>& contacts() const { return contacts_; }
+  const std::vector<StepContact>& contacts() const { return contacts_; }
   // The contact problem of the last step (plain data: save it, replay it) and its solution.
   const contact::ContactProblem& last_problem() const { return problem_; }
   const contact::SolverResult& last_result() const { return result_; }
@@ -98,51 +138,57 @@ class TwoBodySession {
   void NodalContactForces(Eigen::VectorXd* obstacle_n, Eigen::VectorXd* tool_n) const;
 
  private:
-  void AssembleProblem(const Eigen::MatrixXd& tool_compliance, const std::vector<int>& tool_map,
-                       const Eigen::MatrixXd& obstacle_compliance,
-                       const std::vector<int>& obstacle_map);
+  void BroadPhase(const Eigen::Vector3d& increment_m);
+  void DetectContacts();
+  // Compliance block (3x3, m/N) between surface slots p and q of one body for this step.
+  void AssembleProblem(const Eigen::MatrixXd& tool_compliance, const std::vector<int>& tool_rows,
+                       const Eigen::MatrixXd& obstacle_compliance, const std::vector<int>& obstacle_rows);
   void UpdatePrecomputed();
   void UpdateFullSolve();
 
   const TwoBodyModel& model_;
   SolveMode mode_;
+  const ContactSurface& tool_surface_;
+  const ContactSurface& obstacle_surface_;
   Eigen::Vector3d device_translation_m_ = Eigen::Vector3d::Zero();
-  // Displacements of the candidate nodes after the last step (3n, m), candidate order.
-  Eigen::VectorXd obstacle_candidate_displacement_m_;
-  Eigen::VectorXd tool_candidate_displacement_m_;
-  // The tool's candidate displacement for d_k with no contact force (3n_t, m).
-  Eigen::VectorXd tool_free_candidate_m_;
-  // Last contact force on each tool candidate node, world axes (3n_t, N): the warm start.
-  Eigen::VectorXd tool_candidate_force_n_;
-  // Positions for collision detection (reference + last displacement), m.
+  // Tool surface displacement after the last step (3n_t, m) and its free part for d_k.
+  Eigen::VectorXd tool_displacement_m_;
+  Eigen::VectorXd tool_free_m_;
+  // Obstacle surface displacement after the last step (3n_o, m); in kPrecomputed valid on
+  // the broad phase's region slots only.
+  Eigen::VectorXd obstacle_displacement_m_;
+  // Forces of the last step, per loaded surface slot (world, N): what U = C f is made of.
+  std::vector<int> tool_loaded_, obstacle_loaded_;
+  Eigen::VectorXd tool_slot_force_n_, obstacle_slot_force_n_;  // 3 per slot, valid on loaded
+  std::vector<char> tool_slot_loaded_, obstacle_slot_loaded_;
+  // Positions for collision detection (reference + last displacement [+ rigid increment]), m.
   Eigen::Matrix<double, Eigen::Dynamic, 3> obstacle_positions_m_;
   Eigen::Matrix<double, Eigen::Dynamic, 3> tool_positions_m_;
-  CollisionParameters collision_;
-  ContactDetector detector_;
-  std::vector<ContactPoint> contacts_;
+  // Broad phase: region slots of the obstacle surface, per-slot flag, enabled faces/edge nodes.
+  std::vector<int> region_;
+  std::vector<char> in_region_, obstacle_triangle_enabled_, edge_node_enabled_;
+  // Pass 1: tool nodes vs obstacle faces; pass 2: obstacle edge nodes vs tool faces.
+  CollisionParameters tool_pass_parameters_, edge_pass_parameters_;
+  ContactDetector tool_pass_, edge_pass_;
+  std::vector<ContactPoint> tool_pass_points_, edge_pass_points_;
+  std::vector<int> tool_previous_triangle_, edge_previous_triangle_;
+  std::vector<int> edge_node_slot_;  // edge node index -> obstacle surface slot
+  double last_residual_penetration_m_ = 0.0;  // deepest u_n < 0 left by the last solve, m
+  std::vector<char> tool_is_slave_;  // per tool slot: a pass-1 slave this step
+  std::vector<StepContact> contacts_;
+  // Last world contact force per contact id (3 per id, N): the warm start; zero for ids not
+  // in contact at the last step (previous_ids_).
+  Eigen::VectorXd force_by_id_n_;
+  std::vector<int> previous_ids_;
   contact::ContactProblem problem_;
   contact::SolverWorkspace workspace_;
   contact::SolverResult result_;
   StepOutput output_;
-  // kFullSolve scratch: the active nodes and their per-step compliance blocks.
-  std::vector<int> active_obstacle_nodes_, active_tool_nodes_;
-  std::vector<int> active_obstacle_map_, active_tool_map_;
-  // Haptic-path workspaces, sized once for max_contacts_ (see AssembleProblem).
   int max_contacts_ = 0;
-  // Obstacle compliance spread by each contact's weights, world axes (rows: the compliance
-  // given to AssembleProblem, 3 columns per contact), m/N.
-  Eigen::MatrixXd spread_;
-  // Per contact: positions of its obstacle nodes in that compliance.
-  std::vector<std::array<int, 6>> obstacle_slots_;
-  // Minus the world contact force of each contact (3m_max, N): the obstacle's share.
-  Eigen::VectorXd world_forces_n_;
-  // This step's W gather: spread (true) or pairs (false), see AssembleProblem.
-  bool use_spread_ = false;
-  // kPrecomputed update without the spread: nodal obstacle forces (3n_o, N, valid on the
-  // loaded slots only), a loaded flag per candidate slot and the list of loaded slots.
-  Eigen::VectorXd obstacle_force_n_;
-  std::vector<char> slot_loaded_;
-  std::vector<int> active_slots_;
+  // kFullSolve scratch: active slots per body and their row blocks in the per-step blocks.
+  std::vector<int> active_tool_, active_obstacle_;
+  std::vector<int> active_tool_rows_, active_obstacle_rows_;
+  std::vector<int> identity_tool_rows_, identity_obstacle_rows_;
 };
 
 }  // namespace hapco::sim

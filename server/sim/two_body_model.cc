@@ -2,6 +2,11 @@
 
 #include <algorithm>
 #include <array>
+#include <cmath>
+#include <limits>
+#include <map>
+#include <sstream>
+#include <utility>
 
 #include "common/error.h"
 #include "common/timer.h"
@@ -9,39 +14,99 @@
 namespace hapco::sim {
 namespace {
 
-fem::BoxFace OppositeFace(fem::BoxFace face) {
-  static constexpr std::array<fem::BoxFace, 6> kOpposite = {
-      fem::BoxFace::kXMax, fem::BoxFace::kXMin, fem::BoxFace::kYMax,
-      fem::BoxFace::kYMin, fem::BoxFace::kZMax, fem::BoxFace::kZMin};
-  return kOpposite[static_cast<int>(face)];
-}
-
-// The obstacle face that looks at the tool: the axis direction along which the two boxes are
-// separated the most (the separating axis; 0 gap when resting on each other).
-fem::BoxFace FacingObstacleFace(const fem::BoxMeshSpec& obstacle, const fem::BoxMeshSpec& tool) {
-  const Eigen::Vector3d obstacle_max = obstacle.min_corner_m + obstacle.size_m;
-  const Eigen::Vector3d tool_max = tool.min_corner_m + tool.size_m;
-  double best_gap_m = -std::numeric_limits<double>::infinity();
-  fem::BoxFace best = fem::BoxFace::kZMax;
-  for (int axis = 0; axis < 3; ++axis) {
-    const double gap_above_m = tool.min_corner_m[axis] - obstacle_max[axis];
-    const double gap_below_m = obstacle.min_corner_m[axis] - tool_max[axis];
-    if (gap_above_m > best_gap_m) {
-      best_gap_m = gap_above_m;
-      best = static_cast<fem::BoxFace>(2 * axis + 1);
-    }
-    if (gap_below_m > best_gap_m) {
-      best_gap_m = gap_below_m;
-      best = static_cast<fem::BoxFace>(2 * axis);
-    }
-  }
-  return best;
-}
+Eigen::Vector3d Position(const fem::Mesh& mesh, int node) { return mesh.nodes_m.row(node).transpose(); }
 
 std::vector<int> IndexOf(const std::vector<int>& nodes, int num_nodes) {
   std::vector<int> index(static_cast<std::size_t>(num_nodes), -1);
   for (int i = 0; i < static_cast<int>(nodes.size()); ++i) index[static_cast<std::size_t>(nodes[i])] = i;
   return index;
+}
+
+double SmallestExtent(const fem::Mesh& mesh) {
+  return (mesh.nodes_m.colwise().maxCoeff() - mesh.nodes_m.colwise().minCoeff()).minCoeff();
+}
+
+// Everything of a ContactSurface except the compliance, from its faces.
+ContactSurface DescribeSurface(const fem::Mesh& mesh, std::vector<fem::SurfaceTriangle> triangles) {
+  ContactSurface surface;
+  surface.triangles = std::move(triangles);
+  const auto num_triangles = surface.triangles.size();
+  std::vector<Eigen::Vector3d> normals(num_triangles);
+  for (std::size_t t = 0; t < num_triangles; ++t) {
+    const auto& tri = surface.triangles[t];
+    const Eigen::Vector3d p0 = Position(mesh, tri.corners[0]);
+    const Eigen::Vector3d p1 = Position(mesh, tri.corners[1]);
+    const Eigen::Vector3d p2 = Position(mesh, tri.corners[2]);
+    normals[t] = (p1 - p0).cross(p2 - p0).normalized();
+    surface.triangle_frames.push_back(FrameFromNormal(normals[t]));
+    surface.longest_edge_m =
+        std::max({surface.longest_edge_m, (p1 - p0).norm(), (p2 - p1).norm(), (p0 - p2).norm()});
+    for (int node : tri.corners) surface.nodes.push_back(node);
+    for (int node : tri.midsides) {
+      if (node >= 0) surface.nodes.push_back(node);
+    }
+  }
+  std::sort(surface.nodes.begin(), surface.nodes.end());
+  surface.nodes.erase(std::unique(surface.nodes.begin(), surface.nodes.end()), surface.nodes.end());
+  surface.node_index = IndexOf(surface.nodes, mesh.num_nodes());
+
+  // Sharp edges: two faces of the surface meeting at more than kFeatureEdgeAngleRad. An edge
+  // with one face only (where the reach filter cut the surface) is not a body edge.
+  std::map<std::pair<int, int>, std::vector<std::pair<std::size_t, int>>> edges;
+  for (std::size_t t = 0; t < num_triangles; ++t) {
+    const auto& c = surface.triangles[t].corners;
+    for (int k = 0; k < 3; ++k) {
+      const int a = c[static_cast<std::size_t>(k)], b = c[static_cast<std::size_t>((k + 1) % 3)];
+      edges[{std::min(a, b), std::max(a, b)}].emplace_back(t, k);
+    }
+  }
+  surface.sharp_edges.assign(num_triangles, {false, false, false});
+  surface.on_sharp_edge.assign(surface.nodes.size(), 0);
+  const double cos_feature = std::cos(kFeatureEdgeAngleRad);
+  for (const auto& [key, faces] : edges) {
+    if (faces.size() != 2) continue;
+    if (normals[faces[0].first].dot(normals[faces[1].first]) >= cos_feature) continue;
+    for (const auto& [t, k] : faces) {
+      surface.sharp_edges[t][static_cast<std::size_t>(k)] = true;
+      const auto& tri = surface.triangles[t];
+      surface.on_sharp_edge[static_cast<std::size_t>(surface.node_index[static_cast<std::size_t>(key.first)])] = 1;
+      surface.on_sharp_edge[static_cast<std::size_t>(surface.node_index[static_cast<std::size_t>(key.second)])] = 1;
+      const int midside = tri.midsides[static_cast<std::size_t>(k)];
+      if (midside >= 0) surface.on_sharp_edge[static_cast<std::size_t>(surface.node_index[static_cast<std::size_t>(midside)])] = 1;
+    }
+  }
+
+  // Pseudo-normals: corner k of a face weighted by the face's angle there, so the normal at a
+  // box edge or corner does not depend on how its faces were split into triangles.
+  surface.node_normals.assign(surface.nodes.size(), Eigen::Vector3d::Zero());
+  for (std::size_t t = 0; t < num_triangles; ++t) {
+    const auto& tri = surface.triangles[t];
+    for (int k = 0; k < 3; ++k) {
+      const Eigen::Vector3d p = Position(mesh, tri.corners[static_cast<std::size_t>(k)]);
+      const Eigen::Vector3d e1 = (Position(mesh, tri.corners[static_cast<std::size_t>((k + 1) % 3)]) - p).normalized();
+      const Eigen::Vector3d e2 = (Position(mesh, tri.corners[static_cast<std::size_t>((k + 2) % 3)]) - p).normalized();
+      const double angle_rad = std::acos(std::clamp(e1.dot(e2), -1.0, 1.0));
+      surface.node_normals[static_cast<std::size_t>(surface.node_index[static_cast<std::size_t>(tri.corners[static_cast<std::size_t>(k)])])] +=
+          angle_rad * normals[t];
+      const int midside = tri.midsides[static_cast<std::size_t>(k)];
+      if (midside >= 0) surface.node_normals[static_cast<std::size_t>(surface.node_index[static_cast<std::size_t>(midside)])] += normals[t];
+    }
+  }
+  for (auto& n : surface.node_normals) n.normalize();
+  return surface;
+}
+
+void ComputeCompliance(const fem::ElasticBody& body, ContactSurface* surface) {
+  surface->compliance_m_per_n = body.ComplianceBlock(surface->nodes);
+  const auto n = static_cast<Eigen::Index>(surface->nodes.size());
+  surface->displacement_bound_m_per_n.assign(static_cast<std::size_t>(n), 0.0);
+  for (Eigen::Index j = 0; j < n; ++j) {
+    double bound = 0.0;
+    for (Eigen::Index i = 0; i < n; ++i) {
+      bound = std::max(bound, surface->compliance_m_per_n.block<3, 3>(3 * i, 3 * j).norm());
+    }
+    surface->displacement_bound_m_per_n[static_cast<std::size_t>(j)] = bound;
+  }
 }
 
 }  // namespace
@@ -51,85 +116,96 @@ TwoBodyModel::TwoBodyModel(SceneSpec scene)
   Stopwatch total;
   stats_.build_seconds = obstacle_.stats().assembly_seconds + obstacle_.stats().factorization_seconds +
                          tool_.stats().assembly_seconds + tool_.stats().factorization_seconds;
-  const fem::BoxMeshSpec& obstacle_box = scene_.obstacle.box;
-  const fem::BoxMeshSpec& tool_box = scene_.tool.box;
-
-  // Tool candidates: the face opposite the driven one (the paper's green bottom face).
-  HAPCO_ASSERT(scene_.tool.driven_face.has_value(), "scene checks guarantee a driven face");
-  const fem::BoxFace tool_face = OppositeFace(*scene_.tool.driven_face);
-  tool_candidates_ = fem::NodesOnBoxFace(tool_.mesh(), tool_box, tool_face);
-  tool_candidate_index_ = IndexOf(tool_candidates_, tool_.mesh().num_nodes());
-  tool_normals_ = CandidateNodeNormals(tool_.mesh(), fem::BoundaryTriangles(tool_.mesh()), tool_candidates_);
-
-  // Obstacle candidates: faces on the facing side, within the swept footprint.
-  const fem::BoxFace obstacle_face = FacingObstacleFace(obstacle_box, tool_box);
-  const int normal_axis = static_cast<int>(obstacle_face) / 2;
-  obstacle_thickness_m_ = obstacle_box.size_m[normal_axis];
-  Eigen::Vector3d sweep_min = Eigen::Vector3d::Zero(), sweep_max = Eigen::Vector3d::Zero();
-  for (int step = 1; step <= scene_.total_steps(); ++step) {
-    const Eigen::Vector3d d = scene_.DeviceTranslationAtStep(step);
-    sweep_min = sweep_min.cwiseMin(d);
-    sweep_max = sweep_max.cwiseMax(d);
+  if (!(std::isfinite(scene_.reach_m) && scene_.reach_m > 0.0)) {
+    throw InputError("scene reach_m must be a finite distance > 0 m, got " + std::to_string(scene_.reach_m));
   }
-  const Eigen::Vector3d cell_m = obstacle_box.size_m.cwiseQuotient(obstacle_box.divisions.cast<double>());
-  const double margin_m = cell_m.maxCoeff() + scene_.activation_gap_m;
-  const Eigen::Vector3d reach_min = tool_box.min_corner_m + sweep_min - Eigen::Vector3d::Constant(margin_m);
-  const Eigen::Vector3d reach_max =
-      tool_box.min_corner_m + tool_box.size_m + sweep_max + Eigen::Vector3d::Constant(margin_m);
-  const std::vector<int> face_nodes = fem::NodesOnBoxFace(obstacle_.mesh(), obstacle_box, obstacle_face);
-  const auto& nodes_m = obstacle_.mesh().nodes_m;
-  auto within_reach = [&](int node) {
-    for (int axis = 0; axis < 3; ++axis) {
-      if (axis == normal_axis) continue;
-      const double x = nodes_m(node, axis);
-      if (x < reach_min[axis] || x > reach_max[axis]) return false;
-    }
-    return true;
-  };
-  for (const fem::SurfaceTriangle& triangle : fem::BoundaryTriangles(obstacle_.mesh())) {
-    bool keep = true;
+  const fem::Mesh& obstacle_mesh = obstacle_.mesh();
+  const fem::Mesh& tool_mesh = tool_.mesh();
+  obstacle_thickness_m_ = SmallestExtent(obstacle_mesh);
+  tool_thickness_m_ = SmallestExtent(tool_mesh);
+
+  // The obstacle faces the tool can reach: the tool's home box grown by the device workspace.
+  const double margin_m = scene_.reach_m + scene_.activation_gap_m;
+  const Eigen::Vector3d reach_min = tool_mesh.nodes_m.colwise().minCoeff().transpose().array() - margin_m;
+  const Eigen::Vector3d reach_max = tool_mesh.nodes_m.colwise().maxCoeff().transpose().array() + margin_m;
+  std::vector<fem::SurfaceTriangle> reachable;
+  for (const fem::SurfaceTriangle& triangle : fem::BoundaryTriangles(obstacle_mesh)) {
+    Eigen::Vector3d lo = Position(obstacle_mesh, triangle.corners[0]), hi = lo;
     for (int corner : triangle.corners) {
-      keep = keep && std::binary_search(face_nodes.begin(), face_nodes.end(), corner);
+      lo = lo.cwiseMin(Position(obstacle_mesh, corner));
+      hi = hi.cwiseMax(Position(obstacle_mesh, corner));
     }
-    if (!keep) continue;
-    // Keep a face if any corner is within reach, so the kept patch covers the reach box.
-    if (!(within_reach(triangle.corners[0]) || within_reach(triangle.corners[1]) ||
-          within_reach(triangle.corners[2]))) {
-      continue;
-    }
-    obstacle_triangles_.push_back(triangle);
-    for (int node : triangle.corners) obstacle_candidates_.push_back(node);
-    for (int node : triangle.midsides) {
-      if (node >= 0) obstacle_candidates_.push_back(node);
+    if ((hi.array() >= reach_min.array()).all() && (lo.array() <= reach_max.array()).all()) {
+      reachable.push_back(triangle);
     }
   }
-  if (obstacle_triangles_.empty()) {
-    throw InputError("the tool's path never reaches the obstacle's facing surface: no candidate contact faces");
+  if (reachable.empty()) {
+    std::ostringstream message;
+    message << "no obstacle face is within reach_m = " << scene_.reach_m
+            << " m of the tool: move the bodies closer or raise contact.reach_m";
+    throw InputError(message.str());
   }
-  for (const fem::SurfaceTriangle& triangle : obstacle_triangles_) {
-    const Eigen::Vector3d p0 = nodes_m.row(triangle.corners[0]).transpose();
-    const Eigen::Vector3d p1 = nodes_m.row(triangle.corners[1]).transpose();
-    const Eigen::Vector3d p2 = nodes_m.row(triangle.corners[2]).transpose();
-    obstacle_frames_.push_back(FrameFromNormal((p1 - p0).cross(p2 - p0).normalized()));
+  obstacle_surface_ = DescribeSurface(obstacle_mesh, std::move(reachable));
+  tool_surface_ = DescribeSurface(tool_mesh, fem::BoundaryTriangles(tool_mesh));
+  for (std::size_t i = 0; i < obstacle_surface_.nodes.size(); ++i) {
+    if (obstacle_surface_.on_sharp_edge[i]) {
+      obstacle_edge_nodes_.push_back(obstacle_surface_.nodes[i]);
+      obstacle_edge_normals_.push_back(obstacle_surface_.node_normals[i]);
+    }
   }
-  std::sort(obstacle_candidates_.begin(), obstacle_candidates_.end());
-  obstacle_candidates_.erase(std::unique(obstacle_candidates_.begin(), obstacle_candidates_.end()),
-                             obstacle_candidates_.end());
-  obstacle_candidate_index_ = IndexOf(obstacle_candidates_, obstacle_.mesh().num_nodes());
+
+  // A tool that starts inside the obstacle has no meaningful first step: say how deep.
+  {
+    ContactDetector detector(obstacle_surface_.triangles, obstacle_mesh.nodes_m, tool_surface_.nodes,
+                             tool_surface_.node_normals);
+    CollisionParameters probe;
+    probe.activation_gap_m = scene_.reach_m;
+    probe.max_penetration_m = 0.45 * obstacle_thickness_m_;
+    std::vector<ContactPoint> contacts;
+    detector.Detect(obstacle_mesh.nodes_m, tool_mesh.nodes_m, probe, &contacts);
+    initial_gap_m_ = std::numeric_limits<double>::infinity();
+    const ContactPoint* deepest = nullptr;
+    for (const ContactPoint& c : contacts) {
+      if (c.gap_m < initial_gap_m_) {
+        initial_gap_m_ = c.gap_m;
+        deepest = &c;
+      }
+    }
+    const double tolerance_m = 1e-9 * (obstacle_thickness_m_ + tool_thickness_m_);
+    if (deepest != nullptr && initial_gap_m_ < -tolerance_m) {
+      const Eigen::Vector3d x = Position(tool_mesh, deepest->tool_node);
+      std::ostringstream message;
+      message << "the tool starts inside the obstacle: tool node " << deepest->tool_node << " at ("
+              << x.x() << ", " << x.y() << ", " << x.z() << ") m is " << -initial_gap_m_ * 1e3
+              << " mm deep; move the tool's box so the bodies touch at most (zero gap)";
+      throw InputError(message.str());
+    }
+  }
 
   Stopwatch compliance;
-  obstacle_compliance_ = obstacle_.ComplianceBlock(obstacle_candidates_);
-  tool_compliance_ = tool_.ComplianceBlock(tool_candidates_);
+  ComputeCompliance(obstacle_, &obstacle_surface_);
+  ComputeCompliance(tool_, &tool_surface_);
   stats_.compliance_seconds = compliance.ElapsedSeconds();
+  rigid_contact_compliance_m_per_n_ = std::numeric_limits<double>::infinity();
+  for (const ContactSurface* surface : {&obstacle_surface_, &tool_surface_}) {
+    const Eigen::VectorXd diagonal = surface->compliance_m_per_n.diagonal();
+    for (Eigen::Index i = 0; i < diagonal.size(); ++i) {
+      if (diagonal[i] > 0.0) rigid_contact_compliance_m_per_n_ = std::min(rigid_contact_compliance_m_per_n_, diagonal[i]);
+    }
+  }
+  if (!std::isfinite(rigid_contact_compliance_m_per_n_)) {
+    throw InputError("neither body has a free surface node: every surface node is clamped or driven");
+  }
 
   const Eigen::MatrixXd& fields = tool_.unit_driven_translation_fields();
-  tool_unit_fields_.resize(3 * static_cast<Eigen::Index>(tool_candidates_.size()), 3);
-  for (int i = 0; i < static_cast<int>(tool_candidates_.size()); ++i) {
-    tool_unit_fields_.middleRows(3 * i, 3) = fields.middleRows(3 * tool_candidates_[i], 3);
+  const auto& tool_nodes = tool_surface_.nodes;
+  tool_unit_fields_.resize(3 * static_cast<Eigen::Index>(tool_nodes.size()), 3);
+  for (int i = 0; i < static_cast<int>(tool_nodes.size()); ++i) {
+    tool_unit_fields_.middleRows(3 * i, 3) = fields.middleRows(3 * tool_nodes[static_cast<std::size_t>(i)], 3);
   }
-  stats_.operator_bytes = sizeof(double) * static_cast<std::size_t>(obstacle_compliance_.size() +
-                                                                    tool_compliance_.size() +
-                                                                    tool_unit_fields_.size());
+  stats_.operator_bytes =
+      sizeof(double) * static_cast<std::size_t>(obstacle_surface_.compliance_m_per_n.size() +
+                                                tool_surface_.compliance_m_per_n.size() + tool_unit_fields_.size());
   stats_.total_seconds = stats_.build_seconds + total.ElapsedSeconds();
 }
 

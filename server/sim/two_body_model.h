@@ -1,13 +1,19 @@
 #pragma once
 // The per-scene precomputation of algorithms.md §6 ("model no more than the scene needs"):
 // both bodies factored once, and the only operators a haptic step needs, restricted to the
-// nodes that can ever touch:
-//   - the compliance blocks K⁻¹ of the obstacle's candidate surface and of the tool's
-//     candidate surface,
-//   - the tool's free displacement at its candidate nodes per unit device translation,
-//   - the collision detector's tree over the candidate obstacle faces.
+// surfaces that can ever touch — chosen from the geometry and the device workspace, never from
+// a scripted trajectory (docs/free-interaction.md):
+//   - the obstacle's contact surface: every boundary face within `SceneSpec::reach_m` of the
+//     tool's home box (top, sides, ends, bottom: the user moves freely);
+//   - the tool's contact surface: all of its boundary;
+//   - the dense compliance K⁻¹ among each surface's nodes (batched CHOLMOD solves), with a
+//     per-node bound on how far a unit force there can move any surface node (the step's
+//     broad phase uses it to know which part of the obstacle can be near the tool);
+//   - the tool's free displacement at its surface nodes per unit device translation;
+//   - the obstacle's feature nodes (sharp edges and corners) for the reverse contact pass.
 // Immutable after construction; one model serves any number of sessions (design.md ex. 4).
 #include <Eigen/Dense>
+#include <array>
 #include <vector>
 
 #include "fem/elastic_body.h"
@@ -15,6 +21,34 @@
 #include "sim/scene.h"
 
 namespace hapco::sim {
+
+// Adjacent boundary faces whose normals differ by more than this make a sharp (feature) edge,
+// rad: the box edges (90°) are, the flat triangulation's diagonals (0°) are not.
+inline constexpr double kFeatureEdgeAngleRad = 0.5235987755982988;  // 30°
+
+// A body's candidate contact surface and its operators.
+struct ContactSurface {
+  std::vector<fem::SurfaceTriangle> triangles;      // outward right-hand normals
+  // Contact frame (rows n, t1, t2) of each face in the reference configuration.
+  // Small-displacement theory: the contact normal is the undeformed face normal, so W, ũ and
+  // the force directions stay consistent with the linear model (a frictionless press gives
+  // no side force); the deformed geometry only decides where a node sits.
+  std::vector<Eigen::Matrix3d> triangle_frames;
+  // Per face and edge k (corners k, k+1): true when that edge is a sharp edge of the body.
+  std::vector<std::array<bool, 3>> sharp_edges;
+  std::vector<int> nodes;       // sorted node ids carrying the faces (corners and midsides)
+  std::vector<int> node_index;  // node id -> position in `nodes`, -1 if absent
+  // Outward unit normal per node: angle-weighted mean of the adjacent face normals (corners),
+  // plain mean for midsides (Thürmer & Wüthrich pseudo-normals).
+  std::vector<Eigen::Vector3d> node_normals;
+  std::vector<char> on_sharp_edge;  // per node: lies on a sharp edge or corner
+  // Compliance among the surface nodes (3n x 3n, m/N), ordered as `nodes`.
+  Eigen::MatrixXd compliance_m_per_n;
+  // Per node j: max_i ||C(i, j)||_F over the 3x3 blocks, m/N. A force f_j at j moves no
+  // surface node by more than bound_j·|f_j| (Frobenius ≥ spectral norm).
+  std::vector<double> displacement_bound_m_per_n;
+  double longest_edge_m = 0.0;  // longest face edge, m (broad-phase margin)
+};
 
 struct TwoBodyModelStats {
   double build_seconds = 0.0;       // meshing, assembly, factorization of both bodies, s
@@ -25,39 +59,51 @@ struct TwoBodyModelStats {
 
 class TwoBodyModel {
  public:
-  // Throws InputError when the scene cannot be built (see BuildBody) or the bodies do not face
-  // each other.
+  // Throws InputError when the scene cannot be built (see BuildBody), no obstacle face is
+  // within reach, or the tool starts inside the obstacle (the message names the depth).
   explicit TwoBodyModel(SceneSpec scene);
 
   const SceneSpec& scene() const { return scene_; }
   const fem::ElasticBody& obstacle() const { return obstacle_; }
   const fem::ElasticBody& tool() const { return tool_; }
 
-  // Obstacle faces that can be touched: on the box face that looks at the tool, within the
-  // footprint the tool sweeps along the whole trajectory plus a margin of one cell.
-  const std::vector<fem::SurfaceTriangle>& obstacle_triangles() const { return obstacle_triangles_; }
-  // Contact frame (rows n, t1, t2) of each of those faces in the reference configuration.
-  // Small-displacement theory: the contact normal is the undeformed face normal, so W, ũ and
-  // the force directions stay consistent with the linear model (a frictionless press gives
-  // no side force); the deformed geometry only decides where a tool node sits.
-  const std::vector<Eigen::Matrix3d>& obstacle_reference_frames() const { return obstacle_frames_; }
-  // Sorted node ids carrying those faces, and node id -> position in that list (-1 if absent).
-  const std::vector<int>& obstacle_candidates() const { return obstacle_candidates_; }
-  const std::vector<int>& obstacle_candidate_index() const { return obstacle_candidate_index_; }
-  // Tool nodes on its face opposite the driven face, and node id -> position (-1 if absent).
-  const std::vector<int>& tool_candidates() const { return tool_candidates_; }
-  const std::vector<int>& tool_candidate_index() const { return tool_candidate_index_; }
-  const std::vector<Eigen::Vector3d>& tool_candidate_normals() const { return tool_normals_; }
+  const ContactSurface& obstacle_surface() const { return obstacle_surface_; }
+  const ContactSurface& tool_surface() const { return tool_surface_; }
 
-  // Compliance among candidate nodes (3n x 3n, m/N), ordered as the candidate lists.
-  const Eigen::MatrixXd& obstacle_compliance_m_per_n() const { return obstacle_compliance_; }
-  const Eigen::MatrixXd& tool_compliance_m_per_n() const { return tool_compliance_; }
-  // Tool candidate displacement per unit device translation (3n_t x 3, m/m).
+  // Shorthands kept for the callers of the first wave.
+  const std::vector<fem::SurfaceTriangle>& obstacle_triangles() const { return obstacle_surface_.triangles; }
+  const std::vector<Eigen::Matrix3d>& obstacle_reference_frames() const { return obstacle_surface_.triangle_frames; }
+  const std::vector<int>& obstacle_candidates() const { return obstacle_surface_.nodes; }
+  const std::vector<int>& obstacle_candidate_index() const { return obstacle_surface_.node_index; }
+  const std::vector<int>& tool_candidates() const { return tool_surface_.nodes; }
+  const std::vector<int>& tool_candidate_index() const { return tool_surface_.node_index; }
+  const std::vector<Eigen::Vector3d>& tool_candidate_normals() const { return tool_surface_.node_normals; }
+  const Eigen::MatrixXd& obstacle_compliance_m_per_n() const { return obstacle_surface_.compliance_m_per_n; }
+  const Eigen::MatrixXd& tool_compliance_m_per_n() const { return tool_surface_.compliance_m_per_n; }
+
+  // Obstacle nodes on sharp edges and corners (ids, sorted) with their normals: the slaves of
+  // the reverse pass (obstacle node against tool face), which catches an obstacle edge or
+  // corner pressing into a flat tool face where no tool node is.
+  const std::vector<int>& obstacle_edge_nodes() const { return obstacle_edge_nodes_; }
+  const std::vector<Eigen::Vector3d>& obstacle_edge_normals() const { return obstacle_edge_normals_; }
+
+  // Tool surface displacement per unit device translation (3n_t x 3, m/m).
   const Eigen::MatrixXd& tool_unit_fields() const { return tool_unit_fields_; }
 
-  // Obstacle thickness along the normal of its facing face, m: deeper penetrations than about
-  // half of it would be matched to the opposite face, so it bounds the detector's search.
+  // Smallest extent of each body's bounding box, m. A *new* contact deeper than about half of
+  // it would be matched to the far side of the body, which bounds the detector's search for
+  // contacts without history (persistent contacts have no depth limit).
   double obstacle_thickness_m() const { return obstacle_thickness_m_; }
+  double tool_thickness_m() const { return tool_thickness_m_; }
+  // Smallest gap between the tool surface and the obstacle in the reference configuration
+  // (tool nodes against obstacle faces), m; +inf when no tool node faces an obstacle face.
+  double initial_gap_m() const { return initial_gap_m_; }
+
+  // Compliance given to a contact whose own W_αα is (near) zero, m/N: a driven tool node
+  // against a clamped obstacle node is rigid against rigid, which the flexibility method
+  // cannot resolve (W_αα = 0). Such a contact gets the compliance of the stiffest free node of
+  // either surface (the smallest positive diagonal entry), so it pushes back hard but finitely.
+  double rigid_contact_compliance_m_per_n() const { return rigid_contact_compliance_m_per_n_; }
 
   const TwoBodyModelStats& stats() const { return stats_; }
 
@@ -65,13 +111,14 @@ class TwoBodyModel {
   SceneSpec scene_;
   fem::ElasticBody obstacle_;
   fem::ElasticBody tool_;
-  std::vector<fem::SurfaceTriangle> obstacle_triangles_;
-  std::vector<Eigen::Matrix3d> obstacle_frames_;
-  std::vector<int> obstacle_candidates_, obstacle_candidate_index_;
-  std::vector<int> tool_candidates_, tool_candidate_index_;
-  std::vector<Eigen::Vector3d> tool_normals_;
-  Eigen::MatrixXd obstacle_compliance_, tool_compliance_, tool_unit_fields_;
+  ContactSurface obstacle_surface_, tool_surface_;
+  std::vector<int> obstacle_edge_nodes_;
+  std::vector<Eigen::Vector3d> obstacle_edge_normals_;
+  Eigen::MatrixXd tool_unit_fields_;
   double obstacle_thickness_m_ = 0.0;
+  double tool_thickness_m_ = 0.0;
+  double initial_gap_m_ = 0.0;
+  double rigid_contact_compliance_m_per_n_ = 0.0;
   TwoBodyModelStats stats_;
 };
 
