@@ -1,6 +1,7 @@
 // hapco-scene: load a scene file, mesh and factor its bodies once, and print what a user
 // wants to check before running it (sizes, costs, sanity checks). Thin: the work is in the
 // libraries (design.md, example 14).
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <string>
@@ -13,16 +14,18 @@
 #include "fem/box_mesh.h"
 #include "io/scene_file.h"
 #include "sim/scene.h"
+#include "sim/two_body_model.h"
 
 namespace {
 
 constexpr const char* kUsage = R"(usage: hapco-scene SCENE.txtpb [--no-compliance]
 
 Loads a HapCo scene file (proto/scene.proto), meshes both bodies, assembles and factors their
-stiffness once (CHOLMOD), computes the compliance blocks of the candidate contact surfaces
-(obstacle top face, tool bottom face) and prints sizes, costs and sanity checks.
+stiffness once (CHOLMOD), builds exactly what hapco-sim and hapco-server precompute (the
+contact surfaces within contact.reach_m of the tool, the dense compliance among their nodes,
+the tool's unit fields) and prints sizes, costs, memory and sanity checks.
 
-  --no-compliance   skip the compliance blocks (faster on very fine meshes)
+  --no-compliance   stop after the factorisations (faster on very fine meshes)
   --help            this text
 
 Exit code: 0 on success, 1 on a bad scene (one line on stderr names file, line and field).
@@ -96,23 +99,35 @@ int Run(int argc, char** argv) {
               "(0 expected)\n", rigid_force_n);
 
   if (compliance) {
-    const std::vector<int> obstacle_nodes =
-        hapco::fem::NodesOnBoxFace(obstacle.mesh(), scene.obstacle.box, hapco::fem::BoxFace::kZMax);
-    const std::vector<int> tool_nodes =
-        hapco::fem::NodesOnBoxFace(tool.mesh(), scene.tool.box, hapco::fem::BoxFace::kZMin);
     hapco::Stopwatch watch;
-    const Eigen::MatrixXd obstacle_compliance = obstacle.ComplianceBlock(obstacle_nodes);
-    const double obstacle_seconds = watch.ElapsedSeconds();
-    watch.Restart();
-    const Eigen::MatrixXd tool_compliance = tool.ComplianceBlock(tool_nodes);
-    const double tool_seconds = watch.ElapsedSeconds();
-    std::printf("contact   candidate surfaces: obstacle top %zu nodes, tool bottom %zu nodes\n",
-                obstacle_nodes.size(), tool_nodes.size());
-    std::printf("          compliance blocks %ldx%ld in %.3f s and %ldx%ld in %.3f s; "
-                "largest obstacle entry %.3g m/N\n",
-                obstacle_compliance.rows(), obstacle_compliance.cols(), obstacle_seconds,
-                tool_compliance.rows(), tool_compliance.cols(), tool_seconds,
-                obstacle_compliance.diagonal().maxCoeff());
+    const hapco::sim::TwoBodyModel model(scene);
+    const auto& o = model.obstacle_surface();
+    const auto& t = model.tool_surface();
+    const auto mib = [](std::size_t bytes) { return static_cast<double>(bytes) / (1 << 20); };
+    const auto dense_bytes = [](const Eigen::MatrixXd& m) { return sizeof(double) * static_cast<std::size_t>(m.size()); };
+    std::printf("contact   candidate surfaces (every boundary face within reach_m = %.3g m of the tool):\n",
+                scene.reach_m);
+    std::printf("          obstacle %zu faces, %zu nodes (%zu on sharp edges: reverse-pass slaves); "
+                "tool %zu faces, %zu nodes\n",
+                o.triangles.size(), o.nodes.size(), model.obstacle_edge_nodes().size(), t.triangles.size(),
+                t.nodes.size());
+    std::printf("precomputed, %.2f s (compliance %.2f s, batched CHOLMOD solves):\n", watch.ElapsedSeconds(),
+                model.stats().compliance_seconds);
+    std::printf("          obstacle compliance %ldx%ld dense, %.1f MiB\n", o.compliance_m_per_n.rows(),
+                o.compliance_m_per_n.cols(), mib(dense_bytes(o.compliance_m_per_n)));
+    std::printf("          tool compliance %ldx%ld dense, %.2f MiB; tool unit fields %ldx3, %.3f MiB\n",
+                t.compliance_m_per_n.rows(), t.compliance_m_per_n.cols(), mib(dense_bytes(t.compliance_m_per_n)),
+                model.tool_unit_fields().rows(), mib(dense_bytes(model.tool_unit_fields())));
+    std::printf("          total operators %.1f MiB; largest obstacle compliance %.3g m/N; rigid-contact "
+                "compliance %.3g m/N\n",
+                mib(model.stats().operator_bytes), o.compliance_m_per_n.diagonal().maxCoeff(),
+                model.rigid_contact_compliance_m_per_n());
+    if (!std::isfinite(model.initial_gap_m())) {
+      std::printf("note      no tool node faces the obstacle at the start: the device must travel before any force\n");
+    } else if (model.initial_gap_m() > scene.activation_gap_m) {
+      std::printf("note      the tool starts %.3g mm from the obstacle: no force until it has travelled that far\n",
+                  model.initial_gap_m() * 1e3);
+    }
   }
   std::printf("contact   mu = %.3g, activation gap %.3g mm; solver %s, tolerance %.3g m\n",
               scene.friction_coefficient, scene.activation_gap_m * 1e3,

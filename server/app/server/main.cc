@@ -146,7 +146,8 @@ int Run(const Options& options) {
     models.push_back(std::make_unique<hapco::sim::TwoBodyModel>(hapco::io::LoadSceneFile(path)));
     served.push_back(models.back().get());
     scenes_line += (scenes_line.empty() ? "" : ", ") + models.back()->scene().name + " (" +
-                   std::to_string(models.back()->tool_candidates().size()) + " tool candidate nodes)";
+                   std::to_string(models.back()->tool_candidates().size()) + " tool + " +
+                   std::to_string(models.back()->obstacle_candidates().size()) + " obstacle surface nodes)";
   }
   hapco::service::ServerOptions server_options = options.server;
   std::unique_ptr<std::FILE, int (*)(std::FILE*)> trace(nullptr, &std::fclose);

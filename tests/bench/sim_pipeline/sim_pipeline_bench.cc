@@ -4,10 +4,8 @@
 //   - the paper's per-step full solves (kFullSolve) on the first --full-steps steps only
 //     (about 1 s per step on the default scene), and the precomputed mode on the same steps
 //     in the same run: the ratio of medians;
-//   - the W gather and displacement update as they were before the optimisation (the 6 × 6
-//     double loop over the obstacle weights of every contact pair, then dense compliance ×
-//     nodal force products), timed on the same contact sets and checked to give the same W:
-//     the before/after of the hot spot in the same run;
+//   - --path top-face: instead of the scene's trajectory, a 3 mm press and a 0.1 mm-step sweep
+//     over the whole top face (tool from x = 5 mm to 95 mm): the cost anywhere on the bar;
 //   - the per-scene precomputation: TwoBodyModelStats, operator bytes, peak RSS;
 //   - heap allocations per step (global operator new counted).
 // The machine is shared: the load average is printed at start and end. Prints numbers only.
@@ -27,6 +25,7 @@
 #include "common/memory.h"
 #include "common/timer.h"
 #include "io/scene_file.h"
+#include "sim/device_path.h"
 #include "sim/step_pipeline.h"
 
 namespace {
@@ -66,7 +65,19 @@ struct Options {
   int full_steps = 12;
   int steps = 0;  // 0: the whole trajectory
   std::string csv;
+  std::string path = "scene";  // or "top-face"
 };
+
+// The device path of the run: the scene's trajectory, or the top-face sweep.
+std::vector<Eigen::Vector3d> DevicePath(const sim::SceneSpec& scene, const std::string& name) {
+  if (name == "scene") return scene.DeviceTrajectory();
+  if (name != "top-face") throw InputError("--path must be scene or top-face, got " + name);
+  const Eigen::Vector3d home = scene.tool.box.min_corner_m;
+  const double x_low = 0.005 - home.x(), x_high = 0.095 - scene.tool.box.size_m.x() - home.x();
+  return sim::PolylinePath({{0, 0, 0}, {0, 0, -0.003}, {x_low, 0, -0.003}, {x_high, 0, -0.003},
+                            {0, 0, -0.003}, {0, 0, 0}},
+                           1e-4);
+}
 
 double Percentile(std::vector<double> v, double q) {
   if (v.empty()) return 0.0;
@@ -80,40 +91,6 @@ std::string LoadAverage() {
   std::string a, b, c;
   file >> a >> b >> c;
   return a + " " + b + " " + c;
-}
-
-// The W gather before the optimisation (git 2a83258): for every pair β ≥ α, the 6 × 6 double
-// sum over the obstacle weights of both contacts, world axes, then rotated. Kept here as the
-// "before" of the hot spot.
-void NaiveFlexibility(const sim::TwoBodyModel& model, const std::vector<sim::ContactPoint>& contacts,
-                      Eigen::MatrixXd* w) {
-  const int m = static_cast<int>(contacts.size());
-  w->resize(3 * m, 3 * m);
-  const Eigen::MatrixXd& tool_c = model.tool_compliance_m_per_n();
-  const Eigen::MatrixXd& obstacle_c = model.obstacle_compliance_m_per_n();
-  const auto& tool_map = model.tool_candidate_index();
-  const auto& obstacle_map = model.obstacle_candidate_index();
-  for (int alpha = 0; alpha < m; ++alpha) {
-    const sim::ContactPoint& a = contacts[static_cast<std::size_t>(alpha)];
-    const int ta = tool_map[static_cast<std::size_t>(a.tool_node)];
-    for (int beta = alpha; beta < m; ++beta) {
-      const sim::ContactPoint& b = contacts[static_cast<std::size_t>(beta)];
-      const int tb = tool_map[static_cast<std::size_t>(b.tool_node)];
-      Eigen::Matrix3d world = tool_c.block<3, 3>(3 * ta, 3 * tb);
-      for (int k = 0; k < a.num_obstacle_nodes; ++k) {
-        const int ok = obstacle_map[static_cast<std::size_t>(a.obstacle_nodes[static_cast<std::size_t>(k)])];
-        Eigen::Matrix3d row_sum = Eigen::Matrix3d::Zero();
-        for (int l = 0; l < b.num_obstacle_nodes; ++l) {
-          const int ol = obstacle_map[static_cast<std::size_t>(b.obstacle_nodes[static_cast<std::size_t>(l)])];
-          row_sum += b.weights[static_cast<std::size_t>(l)] * obstacle_c.block<3, 3>(3 * ok, 3 * ol);
-        }
-        world += a.weights[static_cast<std::size_t>(k)] * row_sum;
-      }
-      const Eigen::Matrix3d local = a.frame * world * b.frame.transpose();
-      w->block<3, 3>(3 * alpha, 3 * beta) = local;
-      if (beta != alpha) w->block<3, 3>(3 * beta, 3 * alpha) = local.transpose();
-    }
-  }
 }
 
 struct Series {
@@ -150,12 +127,16 @@ Options Parse(int argc, char** argv) {
       options.steps = std::max(0, std::atoi(value().c_str()));
     } else if (arg == "--csv") {
       options.csv = value();
+    } else if (arg == "--path") {
+      options.path = value();
     } else if (arg == "--help") {
-      std::printf("usage: sim_pipeline_bench [--scene FILE] [--repeats N] [--full-steps N] [--steps N] [--csv FILE]\n"
+      std::printf("usage: sim_pipeline_bench [--scene FILE] [--repeats N] [--full-steps N] [--steps N] [--csv FILE] [--path scene|top-face]\n"
                   "  --repeats N     whole-trajectory runs of the precomputed mode (default 3)\n"
                   "  --full-steps N  steps timed in full-solve mode, from step 1 (default 12; 0 = skip)\n"
                   "  --steps N       trajectory steps per run (default: all)\n"
-                  "  --csv FILE      per-step rows of the last precomputed run\n");
+                  "  --csv FILE      per-step rows of the last precomputed run\n"
+                  "  --path P        scene: the scene's trajectory (default); top-face: 3 mm press and a\n"
+                  "                  0.1 mm-step sweep over the whole top face\n");
       std::exit(0);
     } else {
       throw InputError("unknown option " + arg + " (see --help)");
@@ -186,53 +167,38 @@ int Run(const Options& options) {
               setup_s, stats.build_seconds, stats.compliance_seconds, stats.total_seconds,
               static_cast<double>(stats.operator_bytes) / (1 << 20), static_cast<double>(rss_before) / (1 << 20),
               static_cast<double>(rss_after) / (1 << 20));
-  const int steps = options.steps > 0 ? std::min(options.steps, scene.total_steps()) : scene.total_steps();
+  const std::vector<Eigen::Vector3d> path = DevicePath(scene, options.path);
+  const int path_steps = static_cast<int>(path.size()) - 1;
+  const int steps = options.steps > 0 ? std::min(options.steps, path_steps) : path_steps;
+  std::printf("path %s: %d steps\n", options.path.c_str(), steps);
 
   // Precomputed mode over the whole trajectory, `repeats` times (a fresh session each time).
   Series all;
   std::vector<double> alloc_per_step;
-  std::vector<double> naive_assemble, spread_assemble;
-  double worst_w_difference = 0.0;
+  std::vector<double> region_nodes, contacts;
   long outer_iterations = 0;
   std::FILE* csv = options.csv.empty() ? nullptr : std::fopen(options.csv.c_str(), "w");
   if (!options.csv.empty() && csv == nullptr) throw InputError("cannot write " + options.csv);
   if (csv != nullptr) {
-    std::fprintf(csv, "step,contacts,outer_iterations,detect_s,assemble_s,solve_s,update_s,step_s,naive_assemble_s,allocations\n");
+    std::fprintf(csv, "step,contacts,edge_contacts,region_nodes,outer_iterations,detect_s,assemble_s,solve_s,update_s,step_s,force_n,allocations\n");
   }
   for (int repeat = 0; repeat < options.repeats; ++repeat) {
     sim::TwoBodySession session(model, sim::SolveMode::kPrecomputed);
-    Eigen::MatrixXd naive_w;
-    const Eigen::Index obstacle_rows = model.obstacle_compliance_m_per_n().rows();
-    const Eigen::Index tool_rows = model.tool_compliance_m_per_n().rows();
-    Eigen::VectorXd obstacle_f = Eigen::VectorXd::Ones(obstacle_rows), obstacle_u(obstacle_rows);
-    Eigen::VectorXd tool_f = Eigen::VectorXd::Ones(tool_rows), tool_u(tool_rows);
-    naive_w.resize(3 * static_cast<Eigen::Index>(model.tool_candidates().size()),
-                   3 * static_cast<Eigen::Index>(model.tool_candidates().size()));
     for (int step = 1; step <= steps; ++step) {
-      const Eigen::Vector3d d = scene.DeviceTranslationAtStep(step);
+      const Eigen::Vector3d& d = path[static_cast<std::size_t>(step)];
       const long before = g_allocations.load();
       const sim::StepOutput& out = session.Step(d);
       const long allocations = g_allocations.load() - before;
       all.Add(out);
       alloc_per_step.push_back(static_cast<double>(allocations));
       outer_iterations += out.iterations;
-      double naive_s = 0.0;
-      if (out.num_contacts > 0) {
-        Stopwatch naive;
-        NaiveFlexibility(model, session.contacts(), &naive_w);
-        // The old update: dense compliance × nodal force vector for both bodies.
-        obstacle_u.noalias() = model.obstacle_compliance_m_per_n() * obstacle_f;
-        tool_u.noalias() = model.tool_compliance_m_per_n() * tool_f;
-        naive_s = naive.ElapsedSeconds();
-        naive_assemble.push_back(naive_s);
-        spread_assemble.push_back(out.assemble_seconds + out.update_seconds);
-        const Eigen::MatrixXd& w = session.last_problem().flexibility_m_per_n;
-        worst_w_difference = std::max(worst_w_difference, (w - naive_w).cwiseAbs().maxCoeff() / w.cwiseAbs().maxCoeff());
-      }
+      region_nodes.push_back(out.region_nodes);
+      contacts.push_back(out.num_contacts);
       if (csv != nullptr && repeat == options.repeats - 1) {
-        std::fprintf(csv, "%d,%d,%d,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%ld\n", step, out.num_contacts, out.iterations,
-                     out.detect_seconds, out.assemble_seconds, out.solve_seconds, out.update_seconds,
-                     out.total_seconds, naive_s, allocations);
+        std::fprintf(csv, "%d,%d,%d,%d,%d,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%ld\n", step, out.num_contacts,
+                     out.num_edge_contacts, out.region_nodes, out.iterations, out.detect_seconds,
+                     out.assemble_seconds, out.solve_seconds, out.update_seconds, out.total_seconds,
+                     out.contact_force_n.norm(), allocations);
       }
     }
     std::fprintf(stderr, "precomputed run %d/%d done\n", repeat + 1, options.repeats);
@@ -247,10 +213,10 @@ int Run(const Options& options) {
   PrintRow("update", all.update);
   std::printf("  heap allocations per step: median %.0f, max %.0f (W, ũ, μ are resized when the contact count changes)\n",
               Percentile(alloc_per_step, 0.5), Percentile(alloc_per_step, 1.0));
-  std::printf("\nassemble + update on the same contact sets: before (6x6 double loop per pair, dense C f) "
-              "median %.1f us, after (incl. ũ) median %.1f us, ratio %.2f; max |W_after - W_before| / max|W| = %.2e\n",
-              1e6 * Percentile(naive_assemble, 0.5), 1e6 * Percentile(spread_assemble, 0.5),
-              Percentile(naive_assemble, 0.5) / Percentile(spread_assemble, 0.5), worst_w_difference);
+  std::printf("  contacts per step: median %.0f, max %.0f; broad-phase region: median %.0f, max %.0f of %zu "
+              "obstacle surface nodes\n",
+              Percentile(contacts, 0.5), Percentile(contacts, 1.0), Percentile(region_nodes, 0.5),
+              Percentile(region_nodes, 1.0), model.obstacle_candidates().size());
 
   if (options.full_steps > 0) {
     const int n = std::min(options.full_steps, steps);
@@ -259,7 +225,7 @@ int Run(const Options& options) {
     Series full_series, fast_series;
     double worst_force_difference = 0.0, peak_force = 0.0;
     for (int step = 1; step <= n; ++step) {
-      const Eigen::Vector3d d = scene.DeviceTranslationAtStep(step);
+      const Eigen::Vector3d& d = path[static_cast<std::size_t>(step)];
       const sim::StepOutput& a = fast.Step(d);
       fast_series.Add(a);
       const Eigen::Vector3d fast_force = a.contact_force_n;

@@ -290,7 +290,8 @@ TEST(ServerProcess, TwoScenesServeEachClientTheSceneItNames) {
   }
   server.Signal(SIGTERM);
   ASSERT_EQ(server.Wait(30'000), 0) << ReadFile(dir + "/server.err");
-  EXPECT_NE(ReadFile(dir + "/server.out").find("scenes coarse (25 tool candidate nodes), coarse-frictionless"),
+  // Every boundary node is a candidate: tool 5·5·3 − 3·3·1 = 66, bar 11·3·3 − 9·1·1 = 90.
+  EXPECT_NE(ReadFile(dir + "/server.out").find("scenes coarse (66 tool + 90 obstacle surface nodes), coarse-frictionless"),
             std::string::npos)
       << ReadFile(dir + "/server.out");
   EXPECT_NE(ReadFile(dir + "/server.err")

@@ -1,0 +1,202 @@
+// Free interaction study (issue "Free interaction", docs/free-interaction.md): forces along
+// device paths that leave the scene's scripted footprint. For each scene (benchmarks 1 and 2,
+// the shipped Tet4 tool and a Tet10 tool) and each path it writes DIR/<scene>_<tool>_<path>.csv
+// (one row per 0.1 mm step) and prints a summary row:
+//   steps, not converged, peak |F|, largest step-to-step |Δ|F|| / |F| where |F| > 10 % of the
+//   path's peak, the force direction at the end of the path, monotonic presses.
+// The sweep out and back over the top face also gives the direction dependence: the largest
+// relative difference of |F| between the two visits of the same pose.
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <vector>
+
+#include <Eigen/Dense>
+
+#include "common/error.h"
+#include "common/timer.h"
+#include "io/scene_file.h"
+#include "sim/device_path.h"
+#include "sim/step_pipeline.h"
+
+namespace {
+
+using namespace hapco;  // NOLINT: a short study
+
+struct PathSpec {
+  std::string name;
+  std::vector<Eigen::Vector3d> waypoints;  // device translations, m
+  bool benchmark2_only = false;             // needs the free end at x = 0.1 m
+};
+
+struct PathSummary {
+  int steps = 0, not_converged = 0;
+  double peak_n = 0, max_relative_change = 0, max_change_at_x_m = 0;
+  double direction_dependence = 0;  // sweeps only
+  Eigen::Vector3d final_force_n = Eigen::Vector3d::Zero();
+  bool press_monotonic = true;
+  double worst_step_s = 0;
+};
+
+std::string LoadAverage() {
+  std::ifstream file("/proc/loadavg");
+  std::string a, b, c;
+  file >> a >> b >> c;
+  return a + " " + b + " " + c;
+}
+
+// Tool home: x ∈ [0.04, 0.06], y ∈ [0, 0.02], z ∈ [0.02, 0.03] m on a 0.1 x 0.02 x 0.02 m bar.
+std::vector<PathSpec> Paths() {
+  const double depth = -0.003;
+  std::vector<PathSpec> paths;
+  // The whole top face at 3 mm: the tool's edges reach both ends of the bar, out and back.
+  paths.push_back({"top-sweep",
+                   {{0, 0, 0}, {0, 0, depth}, {-0.04, 0, depth}, {0.04, 0, depth}, {0, 0, depth}, {0, 0, 0}}});
+  // Across the clamped edge at x = 0 (5 mm beyond it) and back.
+  paths.push_back({"over-clamped-edge", {{0, 0, 0}, {0, 0, depth}, {-0.045, 0, depth}, {-0.03, 0, depth}}});
+  // Presses to half the bar's thickness: mid-span, next to the clamp at x = 0, at the free end.
+  auto press = [](double dx) {
+    return std::vector<Eigen::Vector3d>{{0, 0, 0}, {0, 0, 0.001}, {dx, 0, 0.001}, {dx, 0, -0.010}};
+  };
+  paths.push_back({"press-mid", press(0.0)});
+  paths.push_back({"press-clamp", press(-0.0375)});
+  paths.push_back({"press-end", press(0.0375), true});
+  // Sideways pushes: against the end face x = 0.1 m (clamped in benchmark 1, free in 2) and
+  // against the side face y = 0.02 m, 3 mm below the top.
+  paths.push_back({"push-end-face", {{0, 0, 0}, {0, 0, 0.001}, {0.0625, 0, 0.001}, {0.0625, 0, depth}, {0.0585, 0, depth}}});
+  paths.push_back({"push-side-face", {{0, 0, 0}, {0, 0, 0.001}, {0, 0.0225, 0.001}, {0, 0.0225, depth}, {0, 0.0185, depth}}});
+  // Off the free side of the end, 12 mm lower, and back into the end face.
+  paths.push_back({"below-end-and-back",
+                   {{0, 0, 0}, {0, 0, 0.001}, {0.0625, 0, 0.001}, {0.0625, 0, -0.012}, {0.0525, 0, -0.012}}});
+  return paths;
+}
+
+PathSummary RunPath(const sim::TwoBodyModel& model, const PathSpec& spec, const std::string& csv_path) {
+  const std::vector<Eigen::Vector3d> path = sim::PolylinePath(spec.waypoints, 1e-4);
+  sim::TwoBodySession session(model);
+  std::FILE* csv = std::fopen(csv_path.c_str(), "w");
+  if (csv == nullptr) throw InputError("cannot write " + csv_path);
+  std::fprintf(csv, "step,dx_m,dy_m,dz_m,fx_n,fy_n,fz_n,force_n,contacts,edge_contacts,status,iterations,step_s\n");
+  PathSummary summary;
+  std::vector<double> magnitude;
+  for (std::size_t k = 1; k < path.size(); ++k) {
+    const sim::StepOutput& out = session.Step(path[k]);
+    const Eigen::Vector3d f = out.contact_force_n;
+    magnitude.push_back(f.norm());
+    ++summary.steps;
+    if (out.status != contact::SolverStatus::kConverged) ++summary.not_converged;
+    summary.peak_n = std::max(summary.peak_n, f.norm());
+    summary.worst_step_s = std::max(summary.worst_step_s, out.total_seconds);
+    summary.final_force_n = f;
+    std::fprintf(csv, "%zu,%.6g,%.6g,%.6g,%.9g,%.9g,%.9g,%.9g,%d,%d,%s,%d,%.6g\n", k, path[k].x(), path[k].y(),
+                 path[k].z(), f.x(), f.y(), f.z(), f.norm(), out.num_contacts, out.num_edge_contacts,
+                 std::string(contact::StatusName(out.status)).c_str(), out.iterations, out.total_seconds);
+  }
+  std::fclose(csv);
+  // Smoothness where the force is established (> 10 % of the path's peak).
+  for (std::size_t k = 1; k < magnitude.size(); ++k) {
+    const double base = std::max(magnitude[k], magnitude[k - 1]);
+    if (base < 0.1 * summary.peak_n) continue;
+    const double change = std::abs(magnitude[k] - magnitude[k - 1]) / base;
+    if (change > summary.max_relative_change) {
+      summary.max_relative_change = change;
+      summary.max_change_at_x_m = path[k + 1].x();
+    }
+  }
+  // Presses: the last segment goes straight down; |F| must not decrease once in contact.
+  if (spec.name.rfind("press", 0) == 0) {
+    const std::size_t down = path.size() - 1 - 110;  // the 11 mm descent in 0.1 mm steps
+    for (std::size_t k = down + 1; k < magnitude.size(); ++k) {
+      if (magnitude[k - 1] > 1e-6 && magnitude[k] < magnitude[k - 1] * (1 - 1e-9)) summary.press_monotonic = false;
+    }
+  }
+  // Sweeps visit each pose twice (out and back): compare |F| at equal poses in the -x→+x and
+  // +x→-x passes, where both exceed 10 % of the peak.
+  if (spec.name == "top-sweep") {
+    // Path indices: press 1..30, -x to -0.04 m 31..430, +x to +0.04 m 431..1230, -x back to 0
+    // 1231..1630. Pose x = -0.04 + i·0.1 mm is index 430 + i going +x, and 430 - i (i <= 400)
+    // or 2030 - i (i >= 400) going -x; magnitude[k - 1] belongs to path index k.
+    for (std::size_t i = 0; i <= 800; ++i) {
+      const std::size_t forward = 430 + i, backward = i <= 400 ? 430 - i : 2030 - i;
+      if (backward < 1 || forward > magnitude.size() || backward > magnitude.size()) continue;
+      const double a = magnitude[forward - 1], b = magnitude[backward - 1];
+      if (std::max(a, b) < 0.1 * summary.peak_n) continue;
+      summary.direction_dependence = std::max(summary.direction_dependence, std::abs(a - b) / std::max(a, b));
+    }
+  }
+  return summary;
+}
+
+int Run(int argc, char** argv) {
+  std::string out_dir = "free-interaction";
+  bool with_tet10 = true;
+  for (int i = 1; i < argc; ++i) {
+    const std::string arg = argv[i];
+    if (arg == "--out" && i + 1 < argc) {
+      out_dir = argv[++i];
+    } else if (arg == "--no-tet10") {
+      with_tet10 = false;
+    } else if (arg == "--help") {
+      std::printf("usage: free_interaction_study [--out DIR] [--no-tet10]\n"
+                  "  --out DIR    per-path CSVs and summary.csv (default ./free-interaction)\n"
+                  "  --no-tet10   only the shipped Tet4 tool\n");
+      return 0;
+    } else {
+      throw InputError("unknown option " + arg + " (see --help)");
+    }
+  }
+  std::filesystem::create_directories(out_dir);
+  std::printf("load average at start: %s\n", LoadAverage().c_str());
+  std::FILE* summary_csv = std::fopen((out_dir + "/summary.csv").c_str(), "w");
+  if (summary_csv == nullptr) throw InputError("cannot write " + out_dir + "/summary.csv");
+  std::fprintf(summary_csv, "scene,tool,path,steps,not_converged,peak_n,max_relative_change,at_x_m,"
+                            "direction_dependence,final_fx_n,final_fy_n,final_fz_n,press_monotonic,worst_step_s\n");
+  std::printf("%-10s %-5s %-19s %6s %5s %9s %9s %8s %8s  %-28s %s\n", "scene", "tool", "path", "steps", "fail",
+              "peak N", "max dF/F", "at x m", "dir.dep", "final force (N)", "monotonic");
+  for (const char* scene_name : {"benchmark1", "benchmark2"}) {
+    for (const fem::ElementOrder order : {fem::ElementOrder::kTet4, fem::ElementOrder::kTet10}) {
+      if (order == fem::ElementOrder::kTet10 && !with_tet10) continue;
+      sim::SceneSpec scene = io::LoadSceneFile(std::string(HAPCO_SOURCE_DIR) + "/proto/scenes/" + scene_name + ".txtpb");
+      scene.tool.box.order = order;
+      Stopwatch build;
+      const sim::TwoBodyModel model(scene);
+      const char* tool = fem::ToString(order);
+      std::fprintf(stderr, "%s/%s: model %.1f s (%zu obstacle + %zu tool surface nodes, %zu edge nodes)\n",
+                   scene_name, tool, build.ElapsedSeconds(), model.obstacle_candidates().size(),
+                   model.tool_candidates().size(), model.obstacle_edge_nodes().size());
+      for (const PathSpec& spec : Paths()) {
+        if (spec.benchmark2_only && std::string(scene_name) != "benchmark2") continue;
+        const std::string csv = out_dir + "/" + scene_name + "_" + tool + "_" + spec.name + ".csv";
+        const PathSummary s = RunPath(model, spec, csv);
+        const Eigen::Vector3d f = s.final_force_n;
+        std::printf("%-10s %-5s %-19s %6d %5d %9.3f %9.4f %8.4f %8.4f  (%8.3f %8.3f %8.3f) %s\n", scene_name, tool,
+                    spec.name.c_str(), s.steps, s.not_converged, s.peak_n, s.max_relative_change, s.max_change_at_x_m,
+                    s.direction_dependence, f.x(), f.y(), f.z(),
+                    spec.name.rfind("press", 0) == 0 ? (s.press_monotonic ? "yes" : "NO") : "-");
+        std::fprintf(summary_csv, "%s,%s,%s,%d,%d,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%d,%.6g\n", scene_name, tool,
+                     spec.name.c_str(), s.steps, s.not_converged, s.peak_n, s.max_relative_change,
+                     s.max_change_at_x_m, s.direction_dependence, f.x(), f.y(), f.z(), s.press_monotonic ? 1 : 0,
+                     s.worst_step_s);
+        std::fflush(stdout);
+      }
+    }
+  }
+  std::fclose(summary_csv);
+  std::printf("load average at end: %s\n", LoadAverage().c_str());
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  try {
+    return Run(argc, argv);
+  } catch (const std::exception& error) {
+    std::fprintf(stderr, "free_interaction_study: %s\n", error.what());
+    return 1;
+  }
+}
