@@ -58,23 +58,6 @@ Eigen::Vector3d ClosestPointBarycentric(const Eigen::Vector3d& p, const Eigen::V
   return {1.0 - v - w, v, w};
 }
 
-// Barycentric coordinates of the normal projection of p onto the plane of abc.
-Eigen::Vector3d ProjectionBarycentric(const Eigen::Vector3d& p, const Eigen::Vector3d& a,
-                                      const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
-  const Eigen::Vector3d v0 = b - a;
-  const Eigen::Vector3d v1 = c - a;
-  const Eigen::Vector3d v2 = p - a;
-  const double d00 = v0.dot(v0);
-  const double d01 = v0.dot(v1);
-  const double d11 = v1.dot(v1);
-  const double d20 = v2.dot(v0);
-  const double d21 = v2.dot(v1);
-  const double denom = d00 * d11 - d01 * d01;
-  const double v = (d11 * d20 - d01 * d21) / denom;
-  const double w = (d00 * d21 - d01 * d20) / denom;
-  return {1.0 - v - w, v, w};
-}
-
 Eigen::Vector3d Row(const PointsRef& points, int i) { return points.row(i).transpose(); }
 
 void CheckParameters(const CollisionParameters& p) {
@@ -105,6 +88,22 @@ void CheckParameters(const CollisionParameters& p) {
 }
 
 }  // namespace
+
+Eigen::Vector3d ProjectionBarycentric(const Eigen::Vector3d& p, const Eigen::Vector3d& a,
+                                      const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
+  const Eigen::Vector3d v0 = b - a;
+  const Eigen::Vector3d v1 = c - a;
+  const Eigen::Vector3d v2 = p - a;
+  const double d00 = v0.dot(v0);
+  const double d01 = v0.dot(v1);
+  const double d11 = v1.dot(v1);
+  const double d20 = v2.dot(v0);
+  const double d21 = v2.dot(v1);
+  const double denom = d00 * d11 - d01 * d01;
+  const double v = (d11 * d20 - d01 * d21) / denom;
+  const double w = (d00 * d21 - d01 * d20) / denom;
+  return {1.0 - v - w, v, w};
+}
 
 Eigen::Matrix3d FrameFromNormal(const Eigen::Vector3d& n) {
   const Eigen::Vector3d axis =

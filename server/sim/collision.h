@@ -196,6 +196,10 @@ class ContactDetector {
   DetectorStats stats_;
 };
 
+// Barycentric coordinates (of a, b, c) of the normal projection of p onto the plane of abc.
+Eigen::Vector3d ProjectionBarycentric(const Eigen::Vector3d& p, const Eigen::Vector3d& a,
+                                      const Eigen::Vector3d& b, const Eigen::Vector3d& c);
+
 // Contact frame for a unit normal n: rows n, t1, t2 (algorithms.md §2); t1 is e_x minus its
 // normal part (e_y when n is close to ±e_x), t2 = n × t1.
 Eigen::Matrix3d FrameFromNormal(const Eigen::Vector3d& n);

@@ -10,9 +10,10 @@ namespace hapco::sim {
 namespace {
 
 // Barycentric distance below which a reverse-pass point counts as lying on a face edge or a
-// node (dimensionless): there the tool's own nodes already carry the contact (pass 1).
-// The tool deforms, so this is a few percent of a face, not round-off.
-constexpr double kOnEdge = 0.02;
+// node (dimensionless): there the tool's own nodes already carry the contact (pass 1). It is
+// judged in the rigid configuration (reference geometry, tool translated by d), so elastic
+// deformation never switches it: round-off only.
+constexpr double kOnEdge = 1e-6;
 
 Eigen::Vector3d Block(const Eigen::VectorXd& vector, int index) { return vector.segment<3>(3 * index); }
 
@@ -176,7 +177,7 @@ void TwoBodySession::BroadPhase(const Eigen::Vector3d& increment_m) {
   output_.region_nodes = static_cast<int>(region_.size());
 }
 
-void TwoBodySession::DetectContacts() {
+void TwoBodySession::DetectContacts(const Eigen::Vector3d& device_translation_m) {
   tool_pass_.Detect(obstacle_positions_m_, tool_positions_m_, tool_pass_parameters_, &tool_pass_points_,
                     {&tool_previous_triangle_, &obstacle_triangle_enabled_, nullptr});
   edge_pass_.Detect(tool_positions_m_, obstacle_positions_m_, edge_pass_parameters_, &edge_pass_points_,
@@ -211,13 +212,21 @@ void TwoBodySession::DetectContacts() {
     edge_previous_triangle_[static_cast<std::size_t>(p.node_slot)] = p.obstacle_triangle;
     const auto triangle = static_cast<std::size_t>(p.obstacle_triangle);
     const fem::SurfaceTriangle& face = tool_surface_.triangles[triangle];
-    // On a sharp edge of the tool, or on a tool node in contact: pass 1 already has it.
+    // On a sharp edge of the tool, or on a tool node in contact: pass 1 already has it (the
+    // benchmarks' tool is exactly as wide as the bar, so the bar's long edges lie on the
+    // tool's rim). Judged rigidly: reference positions, the tool translated by d.
+    const auto& tool_reference = model_.tool().mesh().nodes_m;
+    const Eigen::Vector3d rigid = ProjectionBarycentric(
+        model_.obstacle().mesh().nodes_m.row(p.tool_node).transpose(),
+        tool_reference.row(face.corners[0]).transpose() + device_translation_m,
+        tool_reference.row(face.corners[1]).transpose() + device_translation_m,
+        tool_reference.row(face.corners[2]).transpose() + device_translation_m);
     bool covered = false;
     for (int k = 0; k < 3; ++k) {
-      covered = covered || (tool_surface_.sharp_edges[triangle][static_cast<std::size_t>(k)] && p.barycentric[(k + 2) % 3] < kOnEdge);
+      covered = covered || (tool_surface_.sharp_edges[triangle][static_cast<std::size_t>(k)] && rigid[(k + 2) % 3] < kOnEdge);
     }
     int corner = 0;
-    if (p.barycentric.maxCoeff(&corner) > 1.0 - kOnEdge) {
+    if (rigid.maxCoeff(&corner) > 1.0 - kOnEdge) {
       covered = covered || tool_is_slave_[static_cast<std::size_t>(tool_index[static_cast<std::size_t>(face.corners[static_cast<std::size_t>(corner)])])];
     }
     if (covered) continue;
@@ -255,7 +264,7 @@ const StepOutput& TwoBodySession::Step(const Eigen::Vector3d& device_translation
   // 1. Broad phase and both detection passes on the predicted configuration.
   Stopwatch watch;
   BroadPhase(device_translation_m - device_translation_m_);
-  DetectContacts();
+  DetectContacts(device_translation_m);
   device_translation_m_ = device_translation_m;
   output_.num_contacts = static_cast<int>(contacts_.size());
   output_.detect_seconds = watch.ElapsedSeconds();

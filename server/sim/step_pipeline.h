@@ -139,7 +139,7 @@ class TwoBodySession {
 
  private:
   void BroadPhase(const Eigen::Vector3d& increment_m);
-  void DetectContacts();
+  void DetectContacts(const Eigen::Vector3d& device_translation_m);
   // Compliance block (3x3, m/N) between surface slots p and q of one body for this step.
   void AssembleProblem(const Eigen::MatrixXd& tool_compliance, const std::vector<int>& tool_rows,
                        const Eigen::MatrixXd& obstacle_compliance, const std::vector<int>& obstacle_rows);

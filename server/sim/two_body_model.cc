@@ -111,7 +111,7 @@ void ComputeCompliance(const fem::ElasticBody& body, ContactSurface* surface) {
 
 }  // namespace
 
-TwoBodyModel::TwoBodyModel(SceneSpec scene)
+TwoBodyModel::TwoBodyModel(SceneSpec scene, std::size_t max_operator_bytes)
     : scene_(std::move(scene)), obstacle_(BuildBody(scene_.obstacle)), tool_(BuildBody(scene_.tool)) {
   Stopwatch total;
   stats_.build_seconds = obstacle_.stats().assembly_seconds + obstacle_.stats().factorization_seconds +
@@ -182,6 +182,17 @@ TwoBodyModel::TwoBodyModel(SceneSpec scene)
     }
   }
 
+  const auto dense_bytes = [](std::size_t nodes) { return sizeof(double) * 9 * nodes * nodes; };
+  const std::size_t estimate =
+      dense_bytes(obstacle_surface_.nodes.size()) + dense_bytes(tool_surface_.nodes.size());
+  if (estimate > max_operator_bytes) {
+    std::ostringstream message;
+    message << "the dense compliance of the contact surfaces would need " << estimate / double(1 << 20)
+            << " MiB (" << obstacle_surface_.nodes.size() << " obstacle + " << tool_surface_.nodes.size()
+            << " tool surface nodes, 72·n² bytes each), above the limit of " << max_operator_bytes / double(1 << 20)
+            << " MiB: use fewer divisions, a smaller contact.reach_m, or Tet4 elements";
+    throw InputError(message.str());
+  }
   Stopwatch compliance;
   ComputeCompliance(obstacle_, &obstacle_surface_);
   ComputeCompliance(tool_, &tool_surface_);

@@ -59,9 +59,15 @@ struct TwoBodyModelStats {
 
 class TwoBodyModel {
  public:
+  // The dense compliance blocks grow as (3n)² in the surface node count n: a scene whose
+  // blocks would need more than this is refused before anything is allocated, bytes.
+  static constexpr std::size_t kDefaultMaxOperatorBytes = std::size_t{4} << 30;  // 4 GiB
+
   // Throws InputError when the scene cannot be built (see BuildBody), no obstacle face is
-  // within reach, or the tool starts inside the obstacle (the message names the depth).
-  explicit TwoBodyModel(SceneSpec scene);
+  // within reach, the tool starts inside the obstacle (the message names the depth), or the
+  // dense operators would exceed max_operator_bytes (the message gives the estimate and how
+  // to shrink it).
+  explicit TwoBodyModel(SceneSpec scene, std::size_t max_operator_bytes = kDefaultMaxOperatorBytes);
 
   const SceneSpec& scene() const { return scene_; }
   const fem::ElasticBody& obstacle() const { return obstacle_; }

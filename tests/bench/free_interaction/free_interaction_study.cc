@@ -12,6 +12,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -116,7 +117,7 @@ PathSummary RunPath(const sim::TwoBodyModel& model, const PathSpec& spec, const 
   }
   // Sweeps visit each pose twice (out and back): compare |F| at equal poses in the -x→+x and
   // +x→-x passes, where both exceed 10 % of the peak.
-  if (spec.name == "top-sweep") {
+  if (spec.name.rfind("top-sweep", 0) == 0) {
     // Path indices: press 1..30, -x to -0.04 m 31..430, +x to +0.04 m 431..1230, -x back to 0
     // 1231..1630. Pose x = -0.04 + i·0.1 mm is index 430 + i going +x, and 430 - i (i <= 400)
     // or 2030 - i (i >= 400) going -x; magnitude[k - 1] belongs to path index k.
@@ -168,10 +169,20 @@ int Run(int argc, char** argv) {
       std::fprintf(stderr, "%s/%s: model %.1f s (%zu obstacle + %zu tool surface nodes, %zu edge nodes)\n",
                    scene_name, tool, build.ElapsedSeconds(), model.obstacle_candidates().size(),
                    model.tool_candidates().size(), model.obstacle_edge_nodes().size());
-      for (const PathSpec& spec : Paths()) {
+      // Frictionless twin of the shipped model: without friction the quasi-static answer is
+      // path independent, so the sweep's out/back difference there is the model's own, and
+      // with friction the rest is what friction explains.
+      sim::SceneSpec frictionless_scene = scene;
+      frictionless_scene.friction_coefficient = 0.0;
+      std::unique_ptr<sim::TwoBodyModel> frictionless;
+      if (order == fem::ElementOrder::kTet4) frictionless = std::make_unique<sim::TwoBodyModel>(frictionless_scene);
+      std::vector<PathSpec> paths = Paths();
+      if (frictionless) paths.push_back({"top-sweep-frictionless", paths.front().waypoints});
+      for (const PathSpec& spec : paths) {
         if (spec.benchmark2_only && std::string(scene_name) != "benchmark2") continue;
         const std::string csv = out_dir + "/" + scene_name + "_" + tool + "_" + spec.name + ".csv";
-        const PathSummary s = RunPath(model, spec, csv);
+        const bool is_frictionless = spec.name == "top-sweep-frictionless";
+        const PathSummary s = RunPath(is_frictionless ? *frictionless : model, spec, csv);
         const Eigen::Vector3d f = s.final_force_n;
         std::printf("%-10s %-5s %-19s %6d %5d %9.3f %9.4f %8.4f %8.4f  (%8.3f %8.3f %8.3f) %s\n", scene_name, tool,
                     spec.name.c_str(), s.steps, s.not_converged, s.peak_n, s.max_relative_change, s.max_change_at_x_m,

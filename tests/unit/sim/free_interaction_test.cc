@@ -95,6 +95,20 @@ TEST(FreeInteractionTest, ToolStartingInsideTheObstacleIsRefusedWithItsDepth) {
   }
 }
 
+// The dense operators are estimated before anything is allocated: 72 n² bytes per surface.
+TEST(FreeInteractionTest, OversizedOperatorsAreRefusedBeforeAllocation) {
+  const SceneSpec scene = BarScene(true);
+  // Surfaces: bar 21·5·5 − 19·3·3 = 354 nodes, tool 66: 72 (354² + 66²) = 9,336,384 bytes.
+  EXPECT_NO_THROW(TwoBodyModel(scene, 9'336'384));
+  try {
+    const TwoBodyModel model(scene, 9'336'383);
+    FAIL() << "an operator above the limit was accepted";
+  } catch (const InputError& error) {
+    EXPECT_NE(std::string(error.what()).find("354 obstacle + 66 tool surface nodes"), std::string::npos)
+        << error.what();
+  }
+}
+
 // A straight press grows monotonically with depth, to half the bar's thickness, and pushes
 // the tool back up: mid-span, next to a clamp and at the free end.
 class PressTest : public ::testing::TestWithParam<double> {};
