@@ -57,6 +57,8 @@ TwoBodySession::TwoBodySession(const TwoBodyModel& model, SolveMode mode)
   workspace_.Reserve(max_contacts_, parameters.max_iterations);
   result_.Reserve(max_contacts_, parameters.max_iterations);
   region_.reserve(n_obstacle);
+  region_runs_.reserve(n_obstacle);
+  cell_moved_m_ = Eigen::VectorXd::Zero(3 * obstacle_surface_.num_cells);
   tool_loaded_.reserve(n_tool);
   previous_ids_.reserve(static_cast<std::size_t>(max_contacts_));
   obstacle_loaded_.reserve(n_obstacle);
@@ -130,49 +132,84 @@ void TwoBodySession::BroadPhase(const Eigen::Vector3d& increment_m) {
     return;
   }
 
-  // Region: no surface node moved farther than Σ_j bound_j |f_j| under the last forces; a
-  // face can hold a tool node only within the activation gap or the step's penetration.
-  double moved_bound_m = 0.0;
+  // Region (rigorous): a face can hold a tool node only within the activation gap, the
+  // step's travel or the last solve's residual penetration, and no node of a cell moved along
+  // axis a by more than Σ_j bound(3c + a, j)·|f_j| under the last forces (ContactSurface).
+  // (plus the detector's lateral slack for persistent faces).
+  const double near_m = tool_pass_parameters_.activation_gap_m + increment_m.norm() + last_residual_penetration_m_ +
+                        2.0 * tool_pass_parameters_.persistent_edge_tolerance * obstacle_surface_.longest_edge_m;
+  const Eigen::MatrixXd& bound = obstacle_surface_.cell_axis_bound_m_per_n;
+  cell_moved_m_.setZero();
   for (int slot : obstacle_loaded_) {
-    moved_bound_m += obstacle_surface_.displacement_bound_m_per_n[static_cast<std::size_t>(slot)] *
-                     Block(obstacle_slot_force_n_, slot).norm();
+    const double f = Block(obstacle_slot_force_n_, slot).norm();
+    cell_moved_m_.noalias() += f * bound.col(slot);
   }
-  const double margin_m = moved_bound_m + tool_pass_parameters_.activation_gap_m + increment_m.norm() +
-                          last_residual_penetration_m_ + obstacle_surface_.longest_edge_m;
-  lo.array() -= margin_m;
-  hi.array() += margin_m;
   for (int slot : region_) in_region_[static_cast<std::size_t>(slot)] = 0;
   region_.clear();
-  for (int i = 0; i < static_cast<int>(obstacle_nodes.size()); ++i) {
-    const auto x = obstacle_reference.row(obstacle_nodes[static_cast<std::size_t>(i)]);
-    if (x(0) >= lo(0) && x(0) <= hi(0) && x(1) >= lo(1) && x(1) <= hi(1) && x(2) >= lo(2) && x(2) <= hi(2)) {
-      region_.push_back(i);
-      in_region_[static_cast<std::size_t>(i)] = 1;
+  const auto& triangles = obstacle_surface_.triangles;
+  const auto& node_index = obstacle_surface_.node_index;
+  const auto& node_cell = obstacle_surface_.node_cell;
+  for (std::size_t t = 0; t < triangles.size(); ++t) {
+    Eigen::Vector3d moved = Eigen::Vector3d::Zero();
+    const auto& tri = triangles[t];
+    for (int k = 0; k < 3; ++k) {
+      for (int node : {tri.corners[static_cast<std::size_t>(k)], tri.midsides[static_cast<std::size_t>(k)]}) {
+        if (node < 0) continue;
+        const int cell = node_cell[static_cast<std::size_t>(node_index[static_cast<std::size_t>(node)])];
+        moved = moved.cwiseMax(cell_moved_m_.segment<3>(3 * cell));
+      }
+    }
+    const Eigen::Vector3d grow = moved.array() + near_m;
+    const bool enabled = ((obstacle_surface_.triangle_min_m[t] - grow).array() <= hi.array()).all() &&
+                         ((obstacle_surface_.triangle_max_m[t] + grow).array() >= lo.array()).all();
+    obstacle_triangle_enabled_[t] = enabled ? 1 : 0;
+    if (!enabled) continue;
+    for (int k = 0; k < 3; ++k) {
+      for (int node : {tri.corners[static_cast<std::size_t>(k)], tri.midsides[static_cast<std::size_t>(k)]}) {
+        if (node < 0) continue;
+        const int slot = node_index[static_cast<std::size_t>(node)];
+        if (!in_region_[static_cast<std::size_t>(slot)]) {
+          in_region_[static_cast<std::size_t>(slot)] = 1;
+          region_.push_back(slot);
+        }
+      }
+    }
+  }
+  // Edge nodes (reverse pass) near the tool's faces, by the same bound.
+  for (std::size_t e = 0; e < edge_node_slot_.size(); ++e) {
+    const int slot = edge_node_slot_[e];
+    const Eigen::Vector3d x = obstacle_reference.row(obstacle_nodes[static_cast<std::size_t>(slot)]).transpose();
+    const Eigen::Vector3d grow = cell_moved_m_.segment<3>(3 * node_cell[static_cast<std::size_t>(slot)]).array() + near_m;
+    const bool near = ((x + grow).array() >= lo.array()).all() && ((x - grow).array() <= hi.array()).all();
+    edge_node_enabled_[e] = near ? 1 : 0;
+    if (near && !in_region_[static_cast<std::size_t>(slot)]) {
+      in_region_[static_cast<std::size_t>(slot)] = 1;
+      region_.push_back(slot);
     }
   }
   // U = C f on the region only (algorithms.md §5): the last step's loaded slots.
+  std::sort(region_.begin(), region_.end());  // ascending slots: rows of C read in order
   const Eigen::MatrixXd& compliance = obstacle_surface_.compliance_m_per_n;
   for (int i : region_) obstacle_displacement_m_.segment<3>(3 * i).setZero();
+  // Consecutive slots form runs: one contiguous (vectorised) product per run and loaded slot.
+  region_runs_.clear();
+  for (std::size_t k = 0; k < region_.size(); ++k) {
+    if (k == 0 || region_[k] != region_[k - 1] + 1) {
+      region_runs_.push_back({region_[k], region_[k] + 1});
+    } else {
+      region_runs_.back().second = region_[k] + 1;
+    }
+  }
   for (int j : obstacle_loaded_) {
     const Eigen::Vector3d f = Block(obstacle_slot_force_n_, j);
-    for (int i : region_) {
-      obstacle_displacement_m_.segment<3>(3 * i).noalias() += compliance.block<3, 3>(3 * i, 3 * j) * f;
+    for (const auto& [begin, end] : region_runs_) {
+      const Eigen::Index rows = 3 * (end - begin);
+      obstacle_displacement_m_.segment(3 * begin, rows).noalias() += compliance.block(3 * begin, 3 * j, rows, 3) * f;
     }
   }
   for (int i : region_) {
     const int node = obstacle_nodes[static_cast<std::size_t>(i)];
     obstacle_positions_m_.row(node) = obstacle_reference.row(node) + Block(obstacle_displacement_m_, i).transpose();
-  }
-  const auto& triangles = obstacle_surface_.triangles;
-  for (std::size_t t = 0; t < triangles.size(); ++t) {
-    bool enabled = true;
-    for (int corner : triangles[t].corners) {
-      enabled = enabled && in_region_[static_cast<std::size_t>(obstacle_surface_.node_index[static_cast<std::size_t>(corner)])];
-    }
-    obstacle_triangle_enabled_[t] = enabled ? 1 : 0;
-  }
-  for (std::size_t e = 0; e < edge_node_slot_.size(); ++e) {
-    edge_node_enabled_[e] = in_region_[static_cast<std::size_t>(edge_node_slot_[e])];
   }
   output_.region_nodes = static_cast<int>(region_.size());
 }
@@ -286,11 +323,11 @@ const StepOutput& TwoBodySession::Step(const Eigen::Vector3d& device_translation
       for (int k = 0; k < c.num_tool; ++k) active_tool_.push_back(c.tool_slots[static_cast<std::size_t>(k)]);
       for (int k = 0; k < c.num_obstacle; ++k) active_obstacle_.push_back(c.obstacle_slots[static_cast<std::size_t>(k)]);
     }
-    std::vector<int> tool_nodes, obstacle_nodes;
     for (auto* slots : {&active_tool_, &active_obstacle_}) {
       std::sort(slots->begin(), slots->end());
       slots->erase(std::unique(slots->begin(), slots->end()), slots->end());
     }
+    std::vector<int> tool_nodes, obstacle_nodes;
     for (int i = 0; i < static_cast<int>(active_tool_.size()); ++i) {
       active_tool_rows_[static_cast<std::size_t>(active_tool_[static_cast<std::size_t>(i)])] = i;
       tool_nodes.push_back(tool_surface_.nodes[static_cast<std::size_t>(active_tool_[static_cast<std::size_t>(i)])]);
@@ -378,8 +415,9 @@ const StepOutput& TwoBodySession::Step(const Eigen::Vector3d& device_translation
   return output_;
 }
 
-void TwoBodySession::AssembleProblem(const Eigen::MatrixXd& tool_compliance, const std::vector<int>& tool_rows,
-                                     const Eigen::MatrixXd& obstacle_compliance,
+void TwoBodySession::AssembleProblem(const Eigen::Ref<const Eigen::MatrixXd>& tool_compliance,
+                                     const std::vector<int>& tool_rows,
+                                     const Eigen::Ref<const Eigen::MatrixXd>& obstacle_compliance,
                                      const std::vector<int>& obstacle_rows) {
   const int m = static_cast<int>(contacts_.size());
   // Same-size resizes are free in Eigen: the 1 kHz path allocates only when m changes.

@@ -18,10 +18,10 @@
 // U_free is the tool's displacement for a rigid device translation with no contact force (0
 // on the obstacle).
 //
-// Broad phase: the obstacle's displacement U = C f is evaluated only on the surface nodes
-// near the tool's predicted box, grown by a bound on how far the last forces can have moved
-// any surface node (ContactSurface::displacement_bound_m_per_n) plus the step's travel, so a
-// step costs what the active contacts cost, not what the surface costs.
+// Broad phase: the obstacle's displacement U = C f is evaluated only on the faces near the
+// tool's predicted box, each grown by a rigorous per-axis bound on how far the last forces
+// can have moved its nodes (ContactSurface::cell_axis_bound_m_per_n) plus the step's travel,
+// so a step costs what the active contacts cost, not what the surface costs.
 //
 // Two modes give the same forces (a test checks 1e-9 relative):
 //   kPrecomputed: W gathered from the per-scene compliance blocks, U from them;
@@ -140,9 +140,11 @@ class TwoBodySession {
  private:
   void BroadPhase(const Eigen::Vector3d& increment_m);
   void DetectContacts(const Eigen::Vector3d& device_translation_m);
-  // Compliance block (3x3, m/N) between surface slots p and q of one body for this step.
-  void AssembleProblem(const Eigen::MatrixXd& tool_compliance, const std::vector<int>& tool_rows,
-                       const Eigen::MatrixXd& obstacle_compliance, const std::vector<int>& obstacle_rows);
+  // W and ũ from the compliance among the active slots of each body: *_rows maps a surface
+  // slot to its block row in the given matrix.
+  void AssembleProblem(const Eigen::Ref<const Eigen::MatrixXd>& tool_compliance, const std::vector<int>& tool_rows,
+                       const Eigen::Ref<const Eigen::MatrixXd>& obstacle_compliance,
+                       const std::vector<int>& obstacle_rows);
   void UpdatePrecomputed();
   void UpdateFullSolve();
 
@@ -166,7 +168,9 @@ class TwoBodySession {
   Eigen::Matrix<double, Eigen::Dynamic, 3> tool_positions_m_;
   // Broad phase: region slots of the obstacle surface, per-slot flag, enabled faces/edge nodes.
   std::vector<int> region_;
+  std::vector<std::pair<int, int>> region_runs_;  // [begin, end) slot runs of region_
   std::vector<char> in_region_, obstacle_triangle_enabled_, edge_node_enabled_;
+  Eigen::VectorXd cell_moved_m_;  // per cell and axis: bound on the last displacement, m
   // Pass 1: tool nodes vs obstacle faces; pass 2: obstacle edge nodes vs tool faces.
   CollisionParameters tool_pass_parameters_, edge_pass_parameters_;
   ContactDetector tool_pass_, edge_pass_;

@@ -38,6 +38,8 @@ ContactSurface DescribeSurface(const fem::Mesh& mesh, std::vector<fem::SurfaceTr
     const Eigen::Vector3d p1 = Position(mesh, tri.corners[1]);
     const Eigen::Vector3d p2 = Position(mesh, tri.corners[2]);
     normals[t] = (p1 - p0).cross(p2 - p0).normalized();
+    surface.triangle_min_m.push_back(p0.cwiseMin(p1).cwiseMin(p2));
+    surface.triangle_max_m.push_back(p0.cwiseMax(p1).cwiseMax(p2));
     surface.triangle_frames.push_back(FrameFromNormal(normals[t]));
     surface.longest_edge_m =
         std::max({surface.longest_edge_m, (p1 - p0).norm(), (p2 - p1).norm(), (p0 - p2).norm()});
@@ -98,14 +100,36 @@ ContactSurface DescribeSurface(const fem::Mesh& mesh, std::vector<fem::SurfaceTr
 
 void ComputeCompliance(const fem::ElasticBody& body, ContactSurface* surface) {
   surface->compliance_m_per_n = body.ComplianceBlock(surface->nodes);
+  // Cells of about two face sizes: fine enough that a clamped end's cells get small bounds,
+  // coarse enough that the per-step bound costs cells x loaded nodes, not nodes x nodes.
+  const auto& mesh = body.mesh();
   const auto n = static_cast<Eigen::Index>(surface->nodes.size());
-  surface->displacement_bound_m_per_n.assign(static_cast<std::size_t>(n), 0.0);
+  Eigen::Vector3d lo = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+  for (int node : surface->nodes) {
+    lo = lo.cwiseMin(Position(mesh, node));
+    hi = hi.cwiseMax(Position(mesh, node));
+  }
+  const double cell_m = std::max(2.0 * surface->longest_edge_m, 1e-12);
+  Eigen::Vector3i cells;
+  for (int a = 0; a < 3; ++a) cells[a] = std::max(1, static_cast<int>(std::ceil((hi[a] - lo[a]) / cell_m)));
+  surface->num_cells = cells.prod();
+  surface->node_cell.resize(static_cast<std::size_t>(n));
+  for (Eigen::Index i = 0; i < n; ++i) {
+    const Eigen::Vector3d x = Position(mesh, surface->nodes[static_cast<std::size_t>(i)]);
+    Eigen::Vector3i c;
+    for (int a = 0; a < 3; ++a) c[a] = std::min(cells[a] - 1, static_cast<int>((x[a] - lo[a]) / cell_m));
+    surface->node_cell[static_cast<std::size_t>(i)] = c[0] + cells[0] * (c[1] + cells[1] * c[2]);
+  }
+  surface->cell_axis_bound_m_per_n = Eigen::MatrixXd::Zero(3 * surface->num_cells, n);
+  const Eigen::MatrixXd& c = surface->compliance_m_per_n;
   for (Eigen::Index j = 0; j < n; ++j) {
-    double bound = 0.0;
     for (Eigen::Index i = 0; i < n; ++i) {
-      bound = std::max(bound, surface->compliance_m_per_n.block<3, 3>(3 * i, 3 * j).norm());
+      const int cell = surface->node_cell[static_cast<std::size_t>(i)];
+      for (int a = 0; a < 3; ++a) {
+        double& bound = surface->cell_axis_bound_m_per_n(3 * cell + a, j);
+        bound = std::max(bound, c.block<1, 3>(3 * i + a, 3 * j).norm());
+      }
     }
-    surface->displacement_bound_m_per_n[static_cast<std::size_t>(j)] = bound;
   }
 }
 

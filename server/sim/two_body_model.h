@@ -44,10 +44,16 @@ struct ContactSurface {
   std::vector<char> on_sharp_edge;  // per node: lies on a sharp edge or corner
   // Compliance among the surface nodes (3n x 3n, m/N), ordered as `nodes`.
   Eigen::MatrixXd compliance_m_per_n;
-  // Per node j: max_i ||C(i, j)||_F over the 3x3 blocks, m/N. A force f_j at j moves no
-  // surface node by more than bound_j·|f_j| (Frobenius ≥ spectral norm).
-  std::vector<double> displacement_bound_m_per_n;
-  double longest_edge_m = 0.0;  // longest face edge, m (broad-phase margin)
+  double longest_edge_m = 0.0;  // longest face edge, m
+  // Reference bounding box of each face, m.
+  std::vector<Eigen::Vector3d> triangle_min_m, triangle_max_m;
+  // Broad-phase bound (rigorous, per axis): the surface's nodes are binned into a grid of
+  // cells; for cell c, axis a and node j, cell_axis_bound_m_per_n(3c + a, j) is the largest
+  // ||C(3i + a, 3j..3j+2)|| over the nodes i of c. Under nodal forces f_j no node of c moves
+  // along a by more than Σ_j cell_axis_bound(3c + a, j)·|f_j| (Cauchy-Schwarz), m/N.
+  Eigen::MatrixXd cell_axis_bound_m_per_n;  // 3·cells x n
+  std::vector<int> node_cell;               // per node: its cell
+  int num_cells = 0;
 };
 
 struct TwoBodyModelStats {
