@@ -43,7 +43,7 @@ def main():
             pressed = [i for i, z in enumerate(d["dz_m"]) if abs(z + 0.003) < 1e-9]
             ax.plot([x[i] for i in pressed], [d["force_n"][i] for i in pressed], style, lw=1,
                     label=name.replace("_top-sweep", "").replace("-frictionless", " mu=0"))
-        ax.set_title(f"{scene}: 3 mm deep slide over the whole top face, out and back")
+        ax.set_title(f"{scene}: 3 mm deep slide over the whole top face, out and back", fontsize=10)
         ax.set_xlabel("tool's left edge x (mm); bar spans 0..100, tool 20 mm wide")
         ax.set_ylabel("|F| on the tool (N)")
         ax.set_yscale("log")
