@@ -20,29 +20,14 @@ constexpr dds_attach_t kSessionToken = 2;
 // Rate limiting is per kind; each pose verdict is a kind of its own (kLogBadPose + verdict).
 enum LogKind { kLogClient = 0, kLogSession = 1, kLogFailure = 2, kLogBadPose = 3, kLogKinds = kLogBadPose + 7 };
 
-const char* VerdictName(PoseVerdict verdict) {
-  switch (verdict) {
-    case PoseVerdict::kAccept: return "accepted";
-    case PoseVerdict::kNonFinite: return "non-finite pose";
-    case PoseVerdict::kOutOfWorkspace: return "pose out of workspace";
-    case PoseVerdict::kJump: return "position jump";
-    case PoseVerdict::kOutOfOrder: return "out-of-order sequence";
-    case PoseVerdict::kDuplicate: return "repeated sequence";
-    case PoseVerdict::kFlood: return "pose flood";
-  }
-  return "?";
-}
-
 // Checks that need no session state (used before a session exists).
 PoseVerdict CheckStateless(const hapco_idl_DevicePose& pose, const PoseLimits& limits) {
-  const Eigen::Vector3d p(pose.position_m.x, pose.position_m.y, pose.position_m.z);
   const auto& q = pose.orientation;
-  if (!p.allFinite() || !std::isfinite(q.w) || !std::isfinite(q.x) || !std::isfinite(q.y) ||
-      !std::isfinite(q.z)) {
+  if (!std::isfinite(q.w) || !std::isfinite(q.x) || !std::isfinite(q.y) || !std::isfinite(q.z)) {
     return PoseVerdict::kNonFinite;
   }
-  if (p.norm() > limits.workspace_m) return PoseVerdict::kOutOfWorkspace;
-  return PoseVerdict::kAccept;
+  return sim::CheckPose(Eigen::Vector3d(pose.position_m.x, pose.position_m.y, pose.position_m.z),
+                        pose.sequence_number, std::nullopt, limits);
 }
 
 // The id in a string<64> field, bounded even without a terminator.
@@ -246,7 +231,7 @@ void ServerLoop::Count(PoseVerdict verdict, const std::string& client_id) {
     case PoseVerdict::kDuplicate: ++in.duplicates; break;
     case PoseVerdict::kFlood: ++in.floods; break;
   }
-  Log(kLogBadPose + static_cast<int>(verdict), std::string(VerdictName(verdict)) + " from '" + client_id + "' ignored");
+  Log(kLogBadPose + static_cast<int>(verdict), std::string(sim::VerdictName(verdict)) + " from '" + client_id + "' ignored");
 }
 
 void ServerLoop::ProcessPoses() {

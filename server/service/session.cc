@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
 #include <ctime>
 
 #include "common/realtime.h"
@@ -21,7 +22,6 @@ hapco_idl_SolverStatus ToIdl(contact::SolverStatus status, int contacts) {
   return hapco_idl_SOLVER_DIVERGED;
 }
 
-constexpr uint64_t kMaxJumpScale = 10;
 
 hapco_idl_Vec3 ToIdl(const Eigen::Vector3d& v) { return {v.x(), v.y(), v.z()}; }
 
@@ -59,20 +59,12 @@ PoseVerdict Session::Check(const hapco_idl_DevicePose& pose, int64_t receive_ns,
   flood_tokens_ -= 1.0;
   const Eigen::Vector3d p(pose.position_m.x, pose.position_m.y, pose.position_m.z);
   const auto& q = pose.orientation;
-  if (!p.allFinite() || !std::isfinite(q.w) || !std::isfinite(q.x) || !std::isfinite(q.y) ||
-      !std::isfinite(q.z)) {
+  if (!std::isfinite(q.w) || !std::isfinite(q.x) || !std::isfinite(q.y) || !std::isfinite(q.z)) {
     return PoseVerdict::kNonFinite;
   }
-  if (p.norm() > limits.workspace_m) return PoseVerdict::kOutOfWorkspace;
-  if (have_pose_) {
-    if (pose.sequence_number == last_sequence_) return PoseVerdict::kDuplicate;
-    if (pose.sequence_number < last_sequence_) return PoseVerdict::kOutOfOrder;
-    // A lost pose legitimately allows a longer move: scale the limit by the sequence gap, up
-    // to kMaxJumpScale (else a pose with a huge sequence number could move anywhere).
-    const double gap = static_cast<double>(std::min<uint64_t>(pose.sequence_number - last_sequence_, kMaxJumpScale));
-    if ((p - last_position_m_).norm() > limits.max_jump_m * gap) return PoseVerdict::kJump;
-  }
-  return PoseVerdict::kAccept;
+  std::optional<sim::AcceptedPose> last;
+  if (have_pose_) last = sim::AcceptedPose{last_sequence_, last_position_m_};
+  return sim::CheckPose(p, pose.sequence_number, last, limits);
 }
 
 int64_t Session::StepAndPublish(const hapco_idl_DevicePose& pose, int64_t receive_ns) {

@@ -12,27 +12,14 @@
 #include "hapco_types.h"
 #include "service/dds.h"
 #include "sim/step_pipeline.h"
+#include "sim/pose_limits.h"
 #include "sim/two_body_model.h"
 
 namespace hapco::service {
 
-// Plausibility limits of the pose stream (design.md: input is never trusted).
-struct PoseLimits {
-  double workspace_m = 0.10;  // |d| above this is out of the device workspace, m
-  // Largest plausible position change per sequence step, m (0.1 m/s at 1 kHz would be
-  // 0.1 mm; 2 mm leaves room for hand-held motion). Scaled by the sequence gap (at most 10x).
-  // A jump is ignored (no step, the client keeps its last force); a client that really is
-  // elsewhere recovers with SESSION_RESET or SESSION_JOIN (the next pose starts the stream).
-  double max_jump_m = 0.002;
-  // Flood limit: a token bucket refilled at max_poses_per_ms per ms holding at most
-  // flood_burst poses. A 1 kHz client with scheduling jitter never empties it; a client
-  // sending more than ~2 poses per ms for longer than a few ms does (extras dropped).
-  double max_poses_per_ms = 2.0;
-  double flood_burst = 5.0;
-};
-
-// Why a pose was not stepped.
-enum class PoseVerdict { kAccept, kNonFinite, kOutOfWorkspace, kJump, kOutOfOrder, kDuplicate, kFlood };
+// Pose plausibility is shared with the offline tools (sim/pose_limits.h).
+using sim::PoseLimits;
+using sim::PoseVerdict;
 
 // Per-session counters of what the server did with this client's poses and samples.
 struct SessionCounters {

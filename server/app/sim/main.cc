@@ -8,6 +8,8 @@
 #include <iterator>
 #include <fstream>
 #include <memory>
+#include <map>
+#include <optional>
 #include <string>
 #include <unistd.h>
 
@@ -16,6 +18,7 @@
 #include "common/timer.h"
 #include "io/scene_file.h"
 #include "io/trajectory_file.h"
+#include "sim/pose_limits.h"
 #include "io/recording.h"
 #include "io/vtk_export.h"
 #include "sim/step_pipeline.h"
@@ -41,6 +44,9 @@ detection, flexibility operator, frictional contact solve, force on the device.
                     CSV with columns x_m,y_m,z_m (hapco-server --trace) or dx_m,dy_m,dz_m
                     (hapco-sim --csv, hapco-report --csv), found by header name
   --client ID       with --trajectory: the rows of that client_id (files of several clients)
+  --workspace-m X   poses with |position| > X m are ignored, as by hapco-server (default 0.1)
+  --max-jump-m X    a pose farther than X m from the last stepped one (x the sequence gap, at
+                    most 10) is ignored, as by hapco-server (default 0.002)
   --csv FILE        one row per step (see the header line for columns and units)
   --vtk DIR         write ParaView files to DIR: deformed bodies and contact points every
                     --vtk-every steps (default 10) and at the last step; open DIR/hapco.pvd
@@ -55,6 +61,7 @@ Exit code: 0 when every step converged, 2 when some did not (the run completes),
 
 struct Options {
   std::string scene_path, csv_path, vtk_dir, record_path, solver_name, mode = "precomputed", trajectory_path, client_id;
+  hapco::sim::PoseLimits limits;
   double tolerance_m = 0, friction = -1, rho_scale = 1;
   int max_iterations = 0, steps = 0, vtk_every = 10;
   bool cold = false, quiet = false;
@@ -95,6 +102,10 @@ Options Parse(int argc, char** argv) {
       options.trajectory_path = value();
     } else if (arg == "--client") {
       options.client_id = value();
+    } else if (arg == "--workspace-m") {
+      options.limits.workspace_m = hapco::cli::ParsePositive("--workspace-m", value());
+    } else if (arg == "--max-jump-m") {
+      options.limits.max_jump_m = hapco::cli::ParsePositive("--max-jump-m", value());
     } else if (arg == "--steps") {
       options.steps = static_cast<int>(hapco::cli::ParseInteger("--steps", value(), 1, 100000000));
     } else if (arg == "--csv") {
@@ -258,8 +269,20 @@ int Run(const Options& options) {
   double peak_force_n = 0;
   long total_iterations = 0;
   hapco::Stopwatch run;
+  // The server's plausibility checks (sim/pose_limits.h), so offline and online runs step the
+  // same poses: a rejected pose is not stepped, as on the server.
+  std::optional<hapco::sim::AcceptedPose> last_pose;
+  std::map<std::string, int> ignored;
   for (int step = 1; step <= steps; ++step) {
-    const auto& out = session.Step(translation_at(step));
+    const Eigen::Vector3d pose_m = translation_at(step);
+    const hapco::sim::PoseVerdict verdict =
+        hapco::sim::CheckPose(pose_m, static_cast<std::uint64_t>(step), last_pose, options.limits);
+    if (verdict != hapco::sim::PoseVerdict::kAccept) {
+      ++ignored[hapco::sim::VerdictName(verdict)];
+      continue;
+    }
+    last_pose = hapco::sim::AcceptedPose{static_cast<std::uint64_t>(step), pose_m};
+    const auto& out = session.Step(pose_m);
     const int phase = file_points.empty() ? scene.PhaseOfStep(step) : 0;
     if (out.status != hapco::contact::SolverStatus::kConverged) ++not_converged;
     peak_force_n = std::max(peak_force_n, out.contact_force_n.norm());
@@ -292,6 +315,16 @@ int Run(const Options& options) {
   if (collection) std::printf("ParaView: open %s/hapco.pvd\n", options.vtk_dir.c_str());
   std::printf("%d steps in %.2f s: peak contact force %.3f N, %ld outer iterations, %d not converged\n",
               steps, run.ElapsedSeconds(), peak_force_n, total_iterations, not_converged);
+  if (!ignored.empty()) {
+    std::string kinds;
+    int total = 0;
+    for (const auto& [name, count] : ignored) {
+      kinds += (kinds.empty() ? "" : ", ") + std::to_string(count) + " " + name;
+      total += count;
+    }
+    std::printf("%d poses ignored as hapco-server would (--workspace-m %.3g, --max-jump-m %.3g): %s\n", total,
+                options.limits.workspace_m, options.limits.max_jump_m, kinds.c_str());
+  }
   return not_converged > 0 ? 2 : 0;
 }
 
