@@ -25,6 +25,16 @@ def load(path):
     return {k: [float(r[k]) for r in rows] for k in ("dx_m", "dy_m", "dz_m", "fx_n", "fy_n", "fz_n", "force_n")}
 
 
+def finish(ax, title, xlabel, ylabel, log=True):
+    ax.set_title(title, fontsize=10)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    if log:
+        ax.set_yscale("log")
+    ax.grid(alpha=0.3)
+    ax.legend()
+
+
 def main():
     if len(sys.argv) != 3:
         sys.exit(__doc__)
@@ -33,7 +43,8 @@ def main():
 
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.2), sharey=False)
     for ax, scene in zip(axes, ("benchmark1", "benchmark2")):
-        for name, style in (("Tet4_top-sweep", "-"), ("Tet10_top-sweep", "--"), ("Tet4_top-sweep-frictionless", ":")):
+        for name, style in (("Tet4_top-sweep", "-"), ("Tet10_top-sweep", "--"), ("Tet4_top-sweep-frictionless", ":"),
+                            ("reference_top-sweep", "k-")):
             path = os.path.join(study, f"{scene}_{name}.csv")
             if not os.path.exists(path):
                 continue
@@ -42,13 +53,10 @@ def main():
             x = [40 + 1e3 * v for v in d["dx_m"]]
             pressed = [i for i, z in enumerate(d["dz_m"]) if abs(z + 0.003) < 1e-9]
             ax.plot([x[i] for i in pressed], [d["force_n"][i] for i in pressed], style, lw=1,
-                    label=name.replace("_top-sweep", "").replace("-frictionless", " mu=0"))
-        ax.set_title(f"{scene}: 3 mm deep slide over the whole top face, out and back", fontsize=10)
-        ax.set_xlabel("tool's left edge x (mm); bar spans 0..100, tool 20 mm wide")
-        ax.set_ylabel("|F| on the tool (N)")
-        ax.set_yscale("log")
-        ax.grid(alpha=0.3)
-        ax.legend()
+                    label=name.replace("_top-sweep", "").replace("-frictionless", " mu=0")
+                    .replace("reference", "refined reference"))
+        finish(ax, f"{scene}: 3 mm deep slide over the whole top face, out and back",
+               "tool's left edge x (mm); bar spans 0..100, tool 20 mm wide", "|F| on the tool (N)")
     fig.tight_layout()
     fig.savefig(os.path.join(out, "free_interaction_sweep.png"), dpi=110)
 
@@ -62,12 +70,8 @@ def main():
             n = len(d["dz_m"])
             depth = [-1e3 * z for z in d["dz_m"][n - 110:]]
             ax.plot(depth, d["force_n"][n - 110:], label=press)
-        ax.set_title(f"{scene}: straight presses to half the bar's thickness")
-        ax.set_xlabel("device travel below the top (mm)")
-        ax.set_ylabel("|F| (N)")
-        ax.set_yscale("log")
-        ax.grid(alpha=0.3)
-        ax.legend()
+        finish(ax, f"{scene}: straight presses to half the bar's thickness", "device travel below the top (mm)",
+               "|F| (N)")
     fig.tight_layout()
     fig.savefig(os.path.join(out, "free_interaction_presses.png"), dpi=110)
 
@@ -83,11 +87,7 @@ def main():
             steps = range(1, len(d["fx_n"]) + 1)
             for key, label in (("fx_n", "Fx"), ("fy_n", "Fy"), ("fz_n", "Fz")):
                 ax.plot(steps, d[key], label=label)
-            ax.set_title(f"{scene}: {path_name}")
-            ax.set_xlabel("step (0.1 mm)")
-            ax.set_ylabel("force on the tool (N)")
-            ax.grid(alpha=0.3)
-            ax.legend()
+            finish(ax, f"{scene}: {path_name}", "step (0.1 mm)", "force on the tool (N)", log=False)
     fig.tight_layout()
     fig.savefig(os.path.join(out, "free_interaction_faces.png"), dpi=110)
 
