@@ -40,9 +40,11 @@ TwoBodySession::TwoBodySession(const TwoBodyModel& model, SolveMode mode)
   // side; persistent contacts keep their face at any depth (ContactDetector), so a deep press
   // or a failed step never lets the tool pass through.
   tool_pass_parameters_.activation_gap_m = model.scene().activation_gap_m;
-  tool_pass_parameters_.max_penetration_m = 0.45 * model.obstacle_thickness_m();
+  max_new_depth_obstacle_m_ = 0.45 * model.obstacle_thickness_m();
+  max_new_depth_tool_m_ = 0.45 * model.tool_thickness_m();
+  tool_pass_parameters_.max_penetration_m = max_new_depth_obstacle_m_;
   edge_pass_parameters_.activation_gap_m = model.scene().activation_gap_m;
-  edge_pass_parameters_.max_penetration_m = 0.45 * model.tool_thickness_m();
+  edge_pass_parameters_.max_penetration_m = max_new_depth_tool_m_;
 
   const std::size_t n_tool = tool_surface_.nodes.size();
   const std::size_t n_obstacle = obstacle_surface_.nodes.size();
@@ -164,14 +166,13 @@ void TwoBodySession::BroadPhase(const Eigen::Vector3d& increment_m) {
                          ((obstacle_surface_.triangle_max_m[t] + grow).array() >= lo.array()).all();
     obstacle_triangle_enabled_[t] = enabled ? 1 : 0;
     if (!enabled) continue;
-    for (int k = 0; k < 3; ++k) {
-      for (int node : {tri.corners[static_cast<std::size_t>(k)], tri.midsides[static_cast<std::size_t>(k)]}) {
-        if (node < 0) continue;
-        const int slot = node_index[static_cast<std::size_t>(node)];
-        if (!in_region_[static_cast<std::size_t>(slot)]) {
-          in_region_[static_cast<std::size_t>(slot)] = 1;
-          region_.push_back(slot);
-        }
+    // The detector reads the corners only (flat faces); midsides of the faces that end up in
+    // contact are added after detection (CompleteContactDisplacements).
+    for (int node : tri.corners) {
+      const int slot = node_index[static_cast<std::size_t>(node)];
+      if (!in_region_[static_cast<std::size_t>(slot)]) {
+        in_region_[static_cast<std::size_t>(slot)] = 1;
+        region_.push_back(slot);
       }
     }
   }
@@ -214,7 +215,32 @@ void TwoBodySession::BroadPhase(const Eigen::Vector3d& increment_m) {
   output_.region_nodes = static_cast<int>(region_.size());
 }
 
+void TwoBodySession::CompleteContactDisplacements() {
+  // U = C f of the last forces at the contact nodes the broad phase left out (midsides of
+  // contact faces): the slip increment of algorithms.md §2 needs them.
+  if (mode_ == SolveMode::kFullSolve) return;
+  const Eigen::MatrixXd& compliance = obstacle_surface_.compliance_m_per_n;
+  for (const StepContact& c : contacts_) {
+    for (int k = 0; k < c.num_obstacle; ++k) {
+      const int slot = c.obstacle_slots[static_cast<std::size_t>(k)];
+      if (in_region_[static_cast<std::size_t>(slot)]) continue;
+      in_region_[static_cast<std::size_t>(slot)] = 1;
+      region_.push_back(slot);
+      Eigen::Vector3d u = Eigen::Vector3d::Zero();
+      for (int j : obstacle_loaded_) u.noalias() += compliance.block<3, 3>(3 * slot, 3 * j) * Block(obstacle_slot_force_n_, j);
+      obstacle_displacement_m_.segment<3>(3 * slot) = u;
+    }
+  }
+}
+
 void TwoBodySession::DetectContacts(const Eigen::Vector3d& device_translation_m) {
+  // A new contact is at most as deep as this step's travel plus what the last solve left
+  // (twice that, for safety), and never deeper than half a body (see the constructor): the
+  // tree's boxes are grown by that, not by the half body, so a query tests only nearby faces.
+  const double new_depth_m = 2.0 * (tool_pass_parameters_.activation_gap_m + step_travel_m_ +
+                                    last_residual_penetration_m_);
+  tool_pass_parameters_.max_penetration_m = std::min(max_new_depth_obstacle_m_, new_depth_m);
+  edge_pass_parameters_.max_penetration_m = std::min(max_new_depth_tool_m_, new_depth_m);
   tool_pass_.Detect(obstacle_positions_m_, tool_positions_m_, tool_pass_parameters_, &tool_pass_points_,
                     {&tool_previous_triangle_, &obstacle_triangle_enabled_, nullptr});
   edge_pass_.Detect(tool_positions_m_, obstacle_positions_m_, edge_pass_parameters_, &edge_pass_points_,
@@ -300,8 +326,10 @@ const StepOutput& TwoBodySession::Step(const Eigen::Vector3d& device_translation
 
   // 1. Broad phase and both detection passes on the predicted configuration.
   Stopwatch watch;
+  step_travel_m_ = (device_translation_m - device_translation_m_).norm();
   BroadPhase(device_translation_m - device_translation_m_);
   DetectContacts(device_translation_m);
+  CompleteContactDisplacements();
   device_translation_m_ = device_translation_m;
   output_.num_contacts = static_cast<int>(contacts_.size());
   output_.detect_seconds = watch.ElapsedSeconds();
