@@ -34,8 +34,9 @@ A simulated haptic device that drives a hapco-server session at 1 kHz.
                       hand: a hand (spring-damper, 300 N/m, 6 N s/m) drags a 0.05 kg device
                       with 0.5 N s/m damping along the trajectory, pushed back by the rendered
                       force; positions quantised to 0.023 mm
-  --trajectory T      scene (default: the scene's phases, one step per tick) or a CSV file
-                      of x_m,y_m,z_m rows (one per tick; a header line is skipped)
+  --trajectory T      scene (default: the scene's phases, one step per tick) or a CSV file,
+                      one row per tick, columns x_m,y_m,z_m or dx_m,dy_m,dz_m found by header
+                      name (hapco-server --trace, hapco-sim --csv, hapco-report --csv)
   --duration S        run S seconds (holding the trajectory's last point after its end);
                       default: the trajectory's length
   --csv FILE          one row per tick (tick, time, pose sequence, position, force sequence,

@@ -131,6 +131,51 @@ TEST(ServerProcess, KinematicPhantomReceivesTheOfflineForces) {
   EXPECT_GE(compared_offline, 1);
 }
 
+// Free interaction over DDS: a path far outside the scene's scripted footprint (2 mm deep, the
+// tool slid 30 mm along the bar, where the old model answered 0 N) gets the forces of an
+// offline replay of exactly the poses the server stepped, and they are not zero.
+TEST(ServerProcess, FreePathOffTheScriptedFootprintGetsTheOfflineForces) {
+  const std::string dir = TestDir();
+  const std::string domain = std::to_string(SetUpTestDomain());
+  {
+    std::ofstream path(dir + "/free_path.csv");
+    path << "x_m,y_m,z_m\n";
+    for (int k = 1; k <= 20; ++k) path << 0 << "," << 0 << "," << -1e-4 * k << "\n";
+    for (int k = 1; k <= 300; ++k) path << -1e-4 * k << "," << 0 << "," << -0.002 << "\n";
+  }
+  Process server({HAPCO_SERVER_EXE, kScene, "--domain", domain, "--trace", dir + "/trace.csv"},
+                 dir + "/server.out", dir + "/server.err");
+  {
+    Process phantom({HAPCO_PHANTOM_EXE, kScene, "--client-id", "free-1", "--domain", domain, "--trajectory",
+                     dir + "/free_path.csv", "--csv", dir + "/phantom.csv", "--connect-timeout-s", "60"},
+                    dir + "/phantom.out", dir + "/phantom.err");
+    ASSERT_EQ(phantom.Wait(120'000), 0) << ReadFile(dir + "/phantom.err");
+  }
+  server.Signal(SIGTERM);
+  ASSERT_EQ(server.Wait(30'000), 0) << ReadFile(dir + "/server.err");
+
+  const sim::TwoBodyModel model(io::LoadSceneFile(kScene));
+  sim::TwoBodySession replay(model);
+  std::map<uint64_t, Eigen::Vector3d> expected;
+  for (const auto& row : ReadCsv(dir + "/trace.csv")) {
+    expected[std::stoull(row.at("sequence"))] = replay.Step(Vec(row, "x_m", "y_m", "z_m")).device_force_n;
+  }
+  ASSERT_GE(expected.size(), 280u) << "most of the 320 poses are stepped";
+  int compared = 0;
+  Eigen::Vector3d last = Eigen::Vector3d::Zero();
+  for (const auto& row : ReadCsv(dir + "/phantom.csv")) {
+    const long long s = std::stoll(row.at("force_sequence"));
+    if (s < 0) continue;
+    ASSERT_TRUE(expected.count(static_cast<uint64_t>(s))) << s;
+    const Eigen::Vector3d received = Vec(row, "raw_fx_n", "raw_fy_n", "raw_fz_n");
+    EXPECT_TRUE(SameForce(received, expected[static_cast<uint64_t>(s)])) << s;
+    last = received;
+    ++compared;
+  }
+  EXPECT_GE(compared, 270);
+  EXPECT_GT(last.z(), 0.5) << "pressed 2 mm, 30 mm off the scripted footprint: " << last.transpose();
+}
+
 // Bad input from a client the test plays itself (NaN, invalid id, out of workspace, jump,
 // duplicate, out of order, flood) is counted (ServerStatus) and the server keeps serving.
 TEST(ServerProcess, BadPosesAndInvalidClientIdAreCountedAndTheServerStaysUp) {
