@@ -244,4 +244,15 @@ TwoBodyModel::TwoBodyModel(SceneSpec scene, std::size_t max_operator_bytes)
   stats_.total_seconds = stats_.build_seconds + total.ElapsedSeconds();
 }
 
+std::string StartingPositionNote(const TwoBodyModel& model) {
+  if (!std::isfinite(model.initial_gap_m())) {
+    return "no tool node faces the obstacle at the start: the device must travel before any force";
+  }
+  if (model.initial_gap_m() <= model.scene().activation_gap_m) return "";
+  std::ostringstream note;
+  note << "the tool starts " << model.initial_gap_m() * 1e3
+       << " mm from the obstacle: no force until the device has travelled that far";
+  return note.str();
+}
+
 }  // namespace hapco::sim

@@ -14,6 +14,7 @@
 // Immutable after construction; one model serves any number of sessions (design.md ex. 4).
 #include <Eigen/Dense>
 #include <array>
+#include <string>
 #include <vector>
 
 #include "fem/elastic_body.h"
@@ -133,5 +134,9 @@ class TwoBodyModel {
   double rigid_contact_compliance_m_per_n_ = 0.0;
   TwoBodyModelStats stats_;
 };
+
+// A note for the user when the tool does not touch the obstacle at the start (its gap exceeds
+// the activation gap): how far, so "no force yet" is not mistaken for a fault. Empty otherwise.
+std::string StartingPositionNote(const TwoBodyModel& model);
 
 }  // namespace hapco::sim

@@ -122,12 +122,8 @@ int Run(int argc, char** argv) {
                 "compliance %.3g m/N\n",
                 mib(model.stats().operator_bytes), o.compliance_m_per_n.diagonal().maxCoeff(),
                 model.rigid_contact_compliance_m_per_n());
-    if (!std::isfinite(model.initial_gap_m())) {
-      std::printf("note      no tool node faces the obstacle at the start: the device must travel before any force\n");
-    } else if (model.initial_gap_m() > scene.activation_gap_m) {
-      std::printf("note      the tool starts %.3g mm from the obstacle: no force until it has travelled that far\n",
-                  model.initial_gap_m() * 1e3);
-    }
+    const std::string note = hapco::sim::StartingPositionNote(model);
+    if (!note.empty()) std::printf("note      %s\n", note.c_str());
   }
   std::printf("contact   mu = %.3g, activation gap %.3g mm; solver %s, tolerance %.3g m\n",
               scene.friction_coefficient, scene.activation_gap_m * 1e3,

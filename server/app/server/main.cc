@@ -145,6 +145,9 @@ int Run(const Options& options) {
   for (const std::string& path : options.scene_paths) {
     models.push_back(std::make_unique<hapco::sim::TwoBodyModel>(hapco::io::LoadSceneFile(path)));
     served.push_back(models.back().get());
+    if (const std::string note = hapco::sim::StartingPositionNote(*models.back()); !note.empty()) {
+      std::printf("hapco-server: scene %s: note: %s\n", models.back()->scene().name.c_str(), note.c_str());
+    }
     scenes_line += (scenes_line.empty() ? "" : ", ") + models.back()->scene().name + " (" +
                    std::to_string(models.back()->tool_candidates().size()) + " tool + " +
                    std::to_string(models.back()->obstacle_candidates().size()) + " obstacle surface nodes)";

@@ -222,6 +222,9 @@ int Run(const Options& options) {
               scene.name.c_str(), model.obstacle().num_dofs(), model.tool().num_dofs(),
               model.obstacle_candidates().size(), model.tool_candidates().size(),
               setup.ElapsedSeconds(), static_cast<double>(model_stats.operator_bytes) / (1 << 20));
+  if (const std::string note = hapco::sim::StartingPositionNote(model); !note.empty()) {
+    std::printf("note: %s\n", note.c_str());
+  }
   hapco::sim::TwoBodySession session(
       model, options.mode == "full" ? hapco::sim::SolveMode::kFullSolve : hapco::sim::SolveMode::kPrecomputed);
   std::printf("solver %s, tolerance %.3g m, mu %.3g, %s start, mode %s\n",

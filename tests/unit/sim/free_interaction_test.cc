@@ -95,6 +95,14 @@ TEST(FreeInteractionTest, ToolStartingInsideTheObstacleIsRefusedWithItsDepth) {
   }
 }
 
+TEST(FreeInteractionTest, ToolStartingAwayGetsANoteWithItsDistance) {
+  EXPECT_EQ(StartingPositionNote(TwoBodyModel(BarScene(true))), "") << "resting on the bar";
+  SceneSpec scene = BarScene(true);
+  scene.tool.box.min_corner_m.z() = 0.025;  // 5 mm above the bar
+  const std::string note = StartingPositionNote(TwoBodyModel(scene));
+  EXPECT_NE(note.find("starts 5 mm from the obstacle"), std::string::npos) << note;
+}
+
 // The dense operators are estimated before anything is allocated: 72 n² bytes per surface.
 TEST(FreeInteractionTest, OversizedOperatorsAreRefusedBeforeAllocation) {
   const SceneSpec scene = BarScene(true);
