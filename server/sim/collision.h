@@ -102,7 +102,9 @@ class ContactDetector {
   // filtered to the faces that can ever be touched), outward right-hand normals.
   // obstacle_reference_positions_m: the obstacle's nodes (N_o x 3) in the reference
   // configuration; they shape the tree topology, later calls only refit the boxes.
-  // tool_nodes: candidate tool node ids (e.g. the tool's bottom face).
+  // tool_nodes: candidate tool node ids (the tool's boundary). The reverse pass of the step
+  // pipeline uses a second detector with the roles swapped: obstacle edge nodes as the
+  // "tool" nodes, the tool's boundary faces as the "obstacle" triangles.
   // tool_normals: outward unit normal of the tool's candidate surface at each tool node
   // (reference configuration, see CandidateNodeNormals), or empty to skip the normal check.
   // Throws InputError for an empty triangle list, node ids out of range, a degenerate face,
