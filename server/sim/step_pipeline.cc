@@ -17,6 +17,24 @@ constexpr double kOnEdge = 1e-6;
 
 Eigen::Vector3d Block(const Eigen::VectorXd& vector, int index) { return vector.segment<3>(3 * index); }
 
+// Σ_k Σ_l c_k d_l C(p_k, q_l) over one body's 3x3 compliance blocks (rows maps a surface slot
+// to its block row in C), world axes, m/N.
+Eigen::Matrix3d WeightedBlockSum(const Eigen::MatrixXd& compliance, const std::vector<int>& rows,
+                                 const std::array<int, 6>& p, const std::array<double, 6>& c, int np,
+                                 const std::array<int, 6>& q, const std::array<double, 6>& d, int nq) {
+  Eigen::Matrix3d total = Eigen::Matrix3d::Zero();
+  for (int k = 0; k < np; ++k) {
+    const int row = 3 * rows[static_cast<std::size_t>(p[static_cast<std::size_t>(k)])];
+    Eigen::Matrix3d sum = Eigen::Matrix3d::Zero();
+    for (int l = 0; l < nq; ++l) {
+      sum.noalias() += d[static_cast<std::size_t>(l)] *
+                       compliance.block<3, 3>(row, 3 * rows[static_cast<std::size_t>(q[static_cast<std::size_t>(l)])]);
+    }
+    total.noalias() += c[static_cast<std::size_t>(k)] * sum;
+  }
+  return total;
+}
+
 std::vector<int> Identity(std::size_t n) {
   std::vector<int> rows(n);
   for (std::size_t i = 0; i < n; ++i) rows[i] = static_cast<int>(i);
@@ -245,8 +263,8 @@ void TwoBodySession::DetectContacts(const Eigen::Vector3d& device_translation_m)
   // A new contact is at most as deep as this step's travel plus what the last solve left
   // (twice that, for safety), and never deeper than half a body (see the constructor): the
   // tree's boxes are grown by that, not by the half body, so a query tests only nearby faces.
-  const double new_depth_m = 2.0 * (tool_pass_parameters_.activation_gap_m + step_travel_m_ +
-                                    last_residual_penetration_m_);
+  const double travel_m = (device_translation_m - device_translation_m_).norm();
+  const double new_depth_m = 2.0 * (tool_pass_parameters_.activation_gap_m + travel_m + last_residual_penetration_m_);
   tool_pass_parameters_.max_penetration_m = std::min(max_new_depth_obstacle_m_, new_depth_m);
   edge_pass_parameters_.max_penetration_m = std::min(max_new_depth_tool_m_, new_depth_m);
   tool_pass_.Detect(obstacle_positions_m_, tool_positions_m_, tool_pass_parameters_, &tool_pass_points_,
@@ -279,6 +297,7 @@ void TwoBodySession::DetectContacts(const Eigen::Vector3d& device_translation_m)
     tool_is_slave_[static_cast<std::size_t>(p.node_slot)] = 1;
   }
   const int tool_node_count = model_.tool().mesh().num_nodes();
+  const auto& tool_reference = model_.tool().mesh().nodes_m;
   for (const ContactPoint& p : edge_pass_points_) {
     edge_previous_triangle_[static_cast<std::size_t>(p.node_slot)] = p.obstacle_triangle;
     const auto triangle = static_cast<std::size_t>(p.obstacle_triangle);
@@ -286,7 +305,6 @@ void TwoBodySession::DetectContacts(const Eigen::Vector3d& device_translation_m)
     // On a sharp edge of the tool, or on a tool node in contact: pass 1 already has it (the
     // benchmarks' tool is exactly as wide as the bar, so the bar's long edges lie on the
     // tool's rim). Judged rigidly: reference positions, the tool translated by d.
-    const auto& tool_reference = model_.tool().mesh().nodes_m;
     const Eigen::Vector3d rigid = ProjectionBarycentric(
         model_.obstacle().mesh().nodes_m.row(p.tool_node).transpose(),
         tool_reference.row(face.corners[0]).transpose() + device_translation_m,
@@ -334,7 +352,6 @@ const StepOutput& TwoBodySession::Step(const Eigen::Vector3d& device_translation
 
   // 1. Broad phase and both detection passes on the predicted configuration.
   Stopwatch watch;
-  step_travel_m_ = (device_translation_m - device_translation_m_).norm();
   BroadPhase(device_translation_m - device_translation_m_);
   DetectContacts(device_translation_m);
   CompleteContactDisplacements();
@@ -451,9 +468,8 @@ const StepOutput& TwoBodySession::Step(const Eigen::Vector3d& device_translation
   return output_;
 }
 
-void TwoBodySession::AssembleProblem(const Eigen::Ref<const Eigen::MatrixXd>& tool_compliance,
-                                     const std::vector<int>& tool_rows,
-                                     const Eigen::Ref<const Eigen::MatrixXd>& obstacle_compliance,
+void TwoBodySession::AssembleProblem(const Eigen::MatrixXd& tool_compliance, const std::vector<int>& tool_rows,
+                                     const Eigen::MatrixXd& obstacle_compliance,
                                      const std::vector<int>& obstacle_rows) {
   const int m = static_cast<int>(contacts_.size());
   // Same-size resizes are free in Eigen: the 1 kHz path allocates only when m changes.
@@ -485,25 +501,11 @@ void TwoBodySession::AssembleProblem(const Eigen::Ref<const Eigen::MatrixXd>& to
     // W_αβ = R_α [Σ_pq c_αp c_βq C(p, q)] R_βᵀ over both bodies; W is symmetric, so β ≥ α.
     for (int beta = alpha; beta < m; ++beta) {
       const StepContact& b = contacts_[static_cast<std::size_t>(beta)];
-      Eigen::Matrix3d world = Eigen::Matrix3d::Zero();
-      for (int k = 0; k < a.num_tool; ++k) {
-        const int row = 3 * tool_rows[static_cast<std::size_t>(a.tool_slots[static_cast<std::size_t>(k)])];
-        Eigen::Matrix3d sum = Eigen::Matrix3d::Zero();
-        for (int l = 0; l < b.num_tool; ++l) {
-          sum.noalias() += b.tool_coefficients[static_cast<std::size_t>(l)] *
-                           tool_compliance.block<3, 3>(row, 3 * tool_rows[static_cast<std::size_t>(b.tool_slots[static_cast<std::size_t>(l)])]);
-        }
-        world.noalias() += a.tool_coefficients[static_cast<std::size_t>(k)] * sum;
-      }
-      for (int k = 0; k < a.num_obstacle; ++k) {
-        const int row = 3 * obstacle_rows[static_cast<std::size_t>(a.obstacle_slots[static_cast<std::size_t>(k)])];
-        Eigen::Matrix3d sum = Eigen::Matrix3d::Zero();
-        for (int l = 0; l < b.num_obstacle; ++l) {
-          sum.noalias() += b.obstacle_coefficients[static_cast<std::size_t>(l)] *
-                           obstacle_compliance.block<3, 3>(row, 3 * obstacle_rows[static_cast<std::size_t>(b.obstacle_slots[static_cast<std::size_t>(l)])]);
-        }
-        world.noalias() += a.obstacle_coefficients[static_cast<std::size_t>(k)] * sum;
-      }
+      const Eigen::Matrix3d world =
+          WeightedBlockSum(tool_compliance, tool_rows, a.tool_slots, a.tool_coefficients, a.num_tool, b.tool_slots,
+                           b.tool_coefficients, b.num_tool) +
+          WeightedBlockSum(obstacle_compliance, obstacle_rows, a.obstacle_slots, a.obstacle_coefficients,
+                           a.num_obstacle, b.obstacle_slots, b.obstacle_coefficients, b.num_obstacle);
       Eigen::Matrix3d local = a.frame * world * b.frame.transpose();
       if (beta == alpha && local(0, 0) < model_.rigid_contact_compliance_m_per_n()) {
         // Rigid against rigid (both sides Dirichlet): see TwoBodyModel.

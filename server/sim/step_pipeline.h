@@ -143,9 +143,8 @@ class TwoBodySession {
   void CompleteContactDisplacements();
   // W and ũ from the compliance among the active slots of each body: *_rows maps a surface
   // slot to its block row in the given matrix.
-  void AssembleProblem(const Eigen::Ref<const Eigen::MatrixXd>& tool_compliance, const std::vector<int>& tool_rows,
-                       const Eigen::Ref<const Eigen::MatrixXd>& obstacle_compliance,
-                       const std::vector<int>& obstacle_rows);
+  void AssembleProblem(const Eigen::MatrixXd& tool_compliance, const std::vector<int>& tool_rows,
+                       const Eigen::MatrixXd& obstacle_compliance, const std::vector<int>& obstacle_rows);
   void UpdatePrecomputed();
   void UpdateFullSolve();
 
@@ -179,7 +178,6 @@ class TwoBodySession {
   std::vector<int> tool_previous_triangle_, edge_previous_triangle_;
   std::vector<int> edge_node_slot_;  // edge node index -> obstacle surface slot
   double last_residual_penetration_m_ = 0.0;  // deepest u_n < 0 left by the last solve, m
-  double step_travel_m_ = 0.0;                // |d_k − d_k−1| of the current step, m
   double max_new_depth_obstacle_m_ = 0.0, max_new_depth_tool_m_ = 0.0;  // half-body bounds, m
   std::vector<char> tool_is_slave_;  // per tool slot: a pass-1 slave this step
   std::vector<StepContact> contacts_;
