@@ -17,7 +17,9 @@ std::string_view ContactStateName(ContactState state) {
 
 Eigen::Vector3d ProjectOnCoulombCone(const Eigen::Vector3d& r, double mu) {
   const double rn = r(0);
-  const double a = std::hypot(r(1), r(2));  // ‖r_t‖
+  // ‖r_t‖ with sqrt, not hypot: forces are far from overflow, and hypot's care costs a tenth
+  // of the global solvers' sweep.
+  const double a = std::sqrt(r(1) * r(1) + r(2) * r(2));
   // Inside K_μ (sticking). r_n >= 0 matters for μ = 0, where a = 0 <= μ r_n = −0.
   if (rn >= 0.0 && a <= mu * rn) return r;
   if (mu * a <= -rn) return Eigen::Vector3d::Zero();     // in the polar cone (separating)

@@ -179,10 +179,18 @@ Eigen::VectorXd ElasticBody::SolveDisplacement(const Eigen::VectorXd& nodal_forc
 
 Eigen::MatrixXd ElasticBody::ComplianceBlock(std::span<const int> nodes) const {
   CheckNodes(nodes, "compliance");
+  const auto n = static_cast<Eigen::Index>(3 * nodes.size());
+  Eigen::MatrixXd c = Eigen::MatrixXd::Zero(n, n);
+  ComplianceColumns(nodes, [&c](int column, const Eigen::Ref<const Eigen::VectorXd>& values) { c.col(column) = values; });
+  return c;
+}
+
+void ElasticBody::ComplianceColumns(
+    std::span<const int> nodes, const std::function<void(int, const Eigen::Ref<const Eigen::VectorXd>&)>& sink) const {
+  CheckNodes(nodes, "compliance");
   const int s = static_cast<int>(nodes.size());
-  Eigen::MatrixXd c = Eigen::MatrixXd::Zero(3 * s, 3 * s);
   const int nf = num_free_dofs();
-  if (nf == 0 || s == 0) return c;
+  if (nf == 0 || s == 0) return;
   // Free columns of the block: (position in the block, free dof index).
   std::vector<std::pair<int, int>> columns;
   for (int j = 0; j < s; ++j)
@@ -193,17 +201,17 @@ Eigen::MatrixXd ElasticBody::ComplianceBlock(std::span<const int> nodes) const {
   // Chunk width: two nf x chunk dense arrays (rhs and solution) of at most ~32 MB each.
   const int max_chunk = std::clamp(static_cast<int>(4'000'000 / nf), 1, 512);
   const int total = static_cast<int>(columns.size());
+  Eigen::VectorXd column = Eigen::VectorXd::Zero(3 * s);
   for (int start = 0; start < total; start += max_chunk) {
     const int width = std::min(max_chunk, total - start);
     Eigen::MatrixXd rhs = Eigen::MatrixXd::Zero(nf, width);
     for (int k = 0; k < width; ++k) rhs(columns[static_cast<std::size_t>(start + k)].second, k) = 1.0;
     const Eigen::MatrixXd x = SolveFree(rhs);
     for (int k = 0; k < width; ++k) {
-      const int block_col = columns[static_cast<std::size_t>(start + k)].first;
-      for (const auto& [block_row, f] : columns) c(block_row, block_col) = x(f, k);
+      for (const auto& [block_row, f] : columns) column[block_row] = x(f, k);
+      sink(columns[static_cast<std::size_t>(start + k)].first, column);
     }
   }
-  return c;
 }
 
 Eigen::Vector3d ElasticBody::ReactionForce(const Eigen::VectorXd& displacement_m,

@@ -1,5 +1,6 @@
 #pragma once
 // A linear elastic body with Dirichlet nodes, factored once (algorithms.md sections 1 and 6).
+#include <functional>
 #include <memory>
 #include <span>
 #include <vector>
@@ -72,6 +73,11 @@ class ElasticBody {
   // zero. Rows/columns of Dirichlet nodes are zero. Solves for several right-hand sides at a
   // time, in chunks sized so the dense work arrays stay below ~64 MB.
   Eigen::MatrixXd ComplianceBlock(std::span<const int> nodes) const;
+  // The same block a column at a time, for callers that store it in their own layout without
+  // a dense copy: sink(c, column) receives each column c (0 <= c < 3|S|, length 3|S|) once;
+  // columns of Dirichlet dofs are never sent (they are zero).
+  void ComplianceColumns(std::span<const int> nodes,
+                         const std::function<void(int, const Eigen::Ref<const Eigen::VectorXd>&)>& sink) const;
 
   // Sum over `nodes` of (K U - f): the force (N) the supports exert on those nodes. For free
   // nodes of an equilibrium solution this is zero to round-off.

@@ -35,10 +35,21 @@ Eigen::Matrix3d WeightedBlockSum(const Eigen::MatrixXd& compliance, const std::v
   return total;
 }
 
-std::vector<int> Identity(std::size_t n) {
-  std::vector<int> rows(n);
-  for (std::size_t i = 0; i < n; ++i) rows[i] = static_cast<int>(i);
-  return rows;
+// The same sum on a blocked C (BlockedCompliance; slots are its nodes), in the same order of
+// operations as the dense one, so both give the same bits.
+Eigen::Matrix3d WeightedBlockSum(const BlockedCompliance& compliance, const std::array<int, 6>& p,
+                                 const std::array<double, 6>& c, int np, const std::array<int, 6>& q,
+                                 const std::array<double, 6>& d, int nq) {
+  Eigen::Matrix3d total = Eigen::Matrix3d::Zero();
+  for (int k = 0; k < np; ++k) {
+    Eigen::Matrix3d sum = Eigen::Matrix3d::Zero();
+    for (int l = 0; l < nq; ++l) {
+      sum.noalias() += d[static_cast<std::size_t>(l)] *
+                       compliance.block(p[static_cast<std::size_t>(k)], q[static_cast<std::size_t>(l)]);
+    }
+    total.noalias() += c[static_cast<std::size_t>(k)] * sum;
+  }
+  return total;
 }
 
 }  // namespace
@@ -86,8 +97,6 @@ TwoBodySession::TwoBodySession(const TwoBodyModel& model, SolveMode mode)
   for (std::size_t e = 0; e < n_edge; ++e) {
     edge_node_slot_[e] = obstacle_surface_.node_index[static_cast<std::size_t>(model.obstacle_edge_nodes()[e])];
   }
-  identity_tool_rows_ = Identity(n_tool);
-  identity_obstacle_rows_ = Identity(n_obstacle);
   Reset();
 }
 
@@ -216,9 +225,9 @@ void TwoBodySession::BroadPhase(const Eigen::Vector3d& increment_m) {
   }
   // U = C f on the region only (algorithms.md §5): the last step's loaded slots.
   std::sort(region_.begin(), region_.end());  // ascending slots: rows of C read in order
-  const Eigen::MatrixXd& compliance = obstacle_surface_.compliance_m_per_n;
-  for (int i : region_) obstacle_displacement_m_.segment<3>(3 * i).setZero();
-  // Consecutive slots form runs: one contiguous (vectorised) product per run and loaded slot.
+  // Consecutive slots form runs: for each loaded slot j the blocks (i, j) of a run are one
+  // contiguous stream (BlockedCompliance).
+  const BlockedCompliance& compliance = obstacle_surface_.compliance_m_per_n;
   region_runs_.clear();
   for (std::size_t k = 0; k < region_.size(); ++k) {
     if (k == 0 || region_[k] != region_[k - 1] + 1) {
@@ -227,11 +236,11 @@ void TwoBodySession::BroadPhase(const Eigen::Vector3d& increment_m) {
       region_runs_.back().second = region_[k] + 1;
     }
   }
+  for (int i : region_) obstacle_displacement_m_.segment<3>(3 * i).setZero();
   for (int j : obstacle_loaded_) {
     const Eigen::Vector3d f = Block(obstacle_slot_force_n_, j);
     for (const auto& [begin, end] : region_runs_) {
-      const Eigen::Index rows = 3 * (end - begin);
-      obstacle_displacement_m_.segment(3 * begin, rows).noalias() += compliance.block(3 * begin, 3 * j, rows, 3) * f;
+      for (int i = begin; i < end; ++i) obstacle_displacement_m_.segment<3>(3 * i).noalias() += compliance.block(i, j) * f;
     }
   }
   for (int i : region_) {
@@ -245,7 +254,7 @@ void TwoBodySession::CompleteContactDisplacements() {
   // U = C f of the last forces at the contact nodes the broad phase left out (midsides of
   // contact faces): the slip increment of algorithms.md §2 needs them.
   if (mode_ == SolveMode::kFullSolve) return;
-  const Eigen::MatrixXd& compliance = obstacle_surface_.compliance_m_per_n;
+  const BlockedCompliance& compliance = obstacle_surface_.compliance_m_per_n;
   for (const StepContact& c : contacts_) {
     for (int k = 0; k < c.num_obstacle; ++k) {
       const int slot = c.obstacle_slots[static_cast<std::size_t>(k)];
@@ -253,7 +262,7 @@ void TwoBodySession::CompleteContactDisplacements() {
       in_region_[static_cast<std::size_t>(slot)] = 1;
       region_.push_back(slot);
       Eigen::Vector3d u = Eigen::Vector3d::Zero();
-      for (int j : obstacle_loaded_) u.noalias() += compliance.block<3, 3>(3 * slot, 3 * j) * Block(obstacle_slot_force_n_, j);
+      for (int j : obstacle_loaded_) u.noalias() += compliance.block(slot, j) * Block(obstacle_slot_force_n_, j);
       obstacle_displacement_m_.segment<3>(3 * slot) = u;
     }
   }
@@ -364,8 +373,7 @@ const StepOutput& TwoBodySession::Step(const Eigen::Vector3d& device_translation
   watch.Restart();
   if (mode_ == SolveMode::kPrecomputed) {
     tool_free_m_.noalias() = model_.tool_unit_fields() * device_translation_m_;
-    AssembleProblem(tool_surface_.compliance_m_per_n, identity_tool_rows_, obstacle_surface_.compliance_m_per_n,
-                    identity_obstacle_rows_);
+    AssembleBlocked(tool_surface_.compliance_m_per_n, obstacle_surface_.compliance_m_per_n);
   } else {
     // The paper's way: compliance columns of the active nodes solved with the factors now.
     for (int slot : active_tool_) active_tool_rows_[static_cast<std::size_t>(slot)] = -1;
@@ -396,7 +404,7 @@ const StepOutput& TwoBodySession::Step(const Eigen::Vector3d& device_translation
     }
     const Eigen::MatrixXd tool_block = model_.tool().ComplianceBlock(tool_nodes);
     const Eigen::MatrixXd obstacle_block = model_.obstacle().ComplianceBlock(obstacle_nodes);
-    AssembleProblem(tool_block, active_tool_rows_, obstacle_block, active_obstacle_rows_);
+    AssembleDense(tool_block, active_tool_rows_, obstacle_block, active_obstacle_rows_);
   }
   output_.assemble_seconds = watch.ElapsedSeconds();
 
@@ -468,9 +476,8 @@ const StepOutput& TwoBodySession::Step(const Eigen::Vector3d& device_translation
   return output_;
 }
 
-void TwoBodySession::AssembleProblem(const Eigen::MatrixXd& tool_compliance, const std::vector<int>& tool_rows,
-                                     const Eigen::MatrixXd& obstacle_compliance,
-                                     const std::vector<int>& obstacle_rows) {
+template <typename PairBlocks>
+void TwoBodySession::AssembleProblem(const PairBlocks& pair_blocks) {
   const int m = static_cast<int>(contacts_.size());
   // Same-size resizes are free in Eigen: the 1 kHz path allocates only when m changes.
   problem_.flexibility_m_per_n.resize(3 * m, 3 * m);
@@ -501,11 +508,7 @@ void TwoBodySession::AssembleProblem(const Eigen::MatrixXd& tool_compliance, con
     // W_αβ = R_α [Σ_pq c_αp c_βq C(p, q)] R_βᵀ over both bodies; W is symmetric, so β ≥ α.
     for (int beta = alpha; beta < m; ++beta) {
       const StepContact& b = contacts_[static_cast<std::size_t>(beta)];
-      const Eigen::Matrix3d world =
-          WeightedBlockSum(tool_compliance, tool_rows, a.tool_slots, a.tool_coefficients, a.num_tool, b.tool_slots,
-                           b.tool_coefficients, b.num_tool) +
-          WeightedBlockSum(obstacle_compliance, obstacle_rows, a.obstacle_slots, a.obstacle_coefficients,
-                           a.num_obstacle, b.obstacle_slots, b.obstacle_coefficients, b.num_obstacle);
+      const Eigen::Matrix3d world = pair_blocks(a, b);
       Eigen::Matrix3d local = a.frame * world * b.frame.transpose();
       if (beta == alpha && local(0, 0) < model_.rigid_contact_compliance_m_per_n()) {
         // Rigid against rigid (both sides Dirichlet): see TwoBodyModel.
@@ -517,14 +520,35 @@ void TwoBodySession::AssembleProblem(const Eigen::MatrixXd& tool_compliance, con
   }
 }
 
+void TwoBodySession::AssembleBlocked(const BlockedCompliance& tool, const BlockedCompliance& obstacle) {
+  AssembleProblem([&](const StepContact& a, const StepContact& b) -> Eigen::Matrix3d {
+    return WeightedBlockSum(tool, a.tool_slots, a.tool_coefficients, a.num_tool, b.tool_slots, b.tool_coefficients,
+                            b.num_tool) +
+           WeightedBlockSum(obstacle, a.obstacle_slots, a.obstacle_coefficients, a.num_obstacle, b.obstacle_slots,
+                            b.obstacle_coefficients, b.num_obstacle);
+  });
+}
+
+void TwoBodySession::AssembleDense(const Eigen::MatrixXd& tool, const std::vector<int>& tool_rows,
+                                   const Eigen::MatrixXd& obstacle, const std::vector<int>& obstacle_rows) {
+  AssembleProblem([&](const StepContact& a, const StepContact& b) -> Eigen::Matrix3d {
+    return WeightedBlockSum(tool, tool_rows, a.tool_slots, a.tool_coefficients, a.num_tool, b.tool_slots,
+                            b.tool_coefficients, b.num_tool) +
+           WeightedBlockSum(obstacle, obstacle_rows, a.obstacle_slots, a.obstacle_coefficients, a.num_obstacle,
+                            b.obstacle_slots, b.obstacle_coefficients, b.num_obstacle);
+  });
+}
+
 void TwoBodySession::UpdatePrecomputed() {
   // U_tool = U_free(d) + C f over the tool surface (algorithms.md §5, §6), from the compliance
   // columns of the loaded slots only. The obstacle's U is evaluated by the next broad phase on
   // the region it needs, from the loaded slots kept here.
-  const Eigen::MatrixXd& tool_compliance = tool_surface_.compliance_m_per_n;
+  const BlockedCompliance& tool_compliance = tool_surface_.compliance_m_per_n;
   tool_displacement_m_ = tool_free_m_;
+  const int n_tool = tool_compliance.nodes();
   for (int slot : tool_loaded_) {
-    tool_displacement_m_.noalias() += tool_compliance.middleCols<3>(3 * slot) * Block(tool_slot_force_n_, slot);
+    const Eigen::Vector3d f = Block(tool_slot_force_n_, slot);
+    for (int i = 0; i < n_tool; ++i) tool_displacement_m_.segment<3>(3 * i).noalias() += tool_compliance.block(i, slot) * f;
   }
 }
 

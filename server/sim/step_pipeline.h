@@ -141,10 +141,15 @@ class TwoBodySession {
   void BroadPhase(const Eigen::Vector3d& increment_m);
   void DetectContacts(const Eigen::Vector3d& device_translation_m);
   void CompleteContactDisplacements();
-  // W and ũ from the compliance among the active slots of each body: *_rows maps a surface
-  // slot to its block row in the given matrix.
-  void AssembleProblem(const Eigen::MatrixXd& tool_compliance, const std::vector<int>& tool_rows,
-                       const Eigen::MatrixXd& obstacle_compliance, const std::vector<int>& obstacle_rows);
+  // W and ũ; pair_blocks(a, b) gives Σ_pq c_ap c_bq C(p, q) over both bodies (world, m/N).
+  template <typename PairBlocks>
+  void AssembleProblem(const PairBlocks& pair_blocks);
+  // From the precomputed surface compliances (slots are their nodes).
+  void AssembleBlocked(const BlockedCompliance& tool, const BlockedCompliance& obstacle);
+  // From per-step dense blocks among the active slots: *_rows maps a surface slot to its
+  // block row in the given matrix (kFullSolve).
+  void AssembleDense(const Eigen::MatrixXd& tool, const std::vector<int>& tool_rows, const Eigen::MatrixXd& obstacle,
+                     const std::vector<int>& obstacle_rows);
   void UpdatePrecomputed();
   void UpdateFullSolve();
 
@@ -193,7 +198,6 @@ class TwoBodySession {
   // kFullSolve scratch: active slots per body and their row blocks in the per-step blocks.
   std::vector<int> active_tool_, active_obstacle_;
   std::vector<int> active_tool_rows_, active_obstacle_rows_;
-  std::vector<int> identity_tool_rows_, identity_obstacle_rows_;
 };
 
 }  // namespace hapco::sim

@@ -99,7 +99,11 @@ ContactSurface DescribeSurface(const fem::Mesh& mesh, std::vector<fem::SurfaceTr
 }
 
 void ComputeCompliance(const fem::ElasticBody& body, ContactSurface* surface) {
-  surface->compliance_m_per_n = body.ComplianceBlock(surface->nodes);
+  // Column by column into the blocked layout: no dense copy, so the peak is the operator.
+  surface->compliance_m_per_n = BlockedCompliance(static_cast<int>(surface->nodes.size()));
+  body.ComplianceColumns(surface->nodes, [surface](int column, const Eigen::Ref<const Eigen::VectorXd>& values) {
+    surface->compliance_m_per_n.SetColumn(column, values);
+  });
   // Cells of about two face sizes: fine enough that a clamped end's cells get small bounds,
   // coarse enough that the per-step bound costs cells x loaded nodes, not nodes x nodes.
   const auto& mesh = body.mesh();
@@ -121,13 +125,14 @@ void ComputeCompliance(const fem::ElasticBody& body, ContactSurface* surface) {
     surface->node_cell[static_cast<std::size_t>(i)] = c[0] + cells[0] * (c[1] + cells[1] * c[2]);
   }
   surface->cell_axis_bound_m_per_n = Eigen::MatrixXd::Zero(3 * surface->num_cells, n);
-  const Eigen::MatrixXd& c = surface->compliance_m_per_n;
-  for (Eigen::Index j = 0; j < n; ++j) {
-    for (Eigen::Index i = 0; i < n; ++i) {
+  const BlockedCompliance& c = surface->compliance_m_per_n;
+  for (int j = 0; j < static_cast<int>(n); ++j) {
+    for (int i = 0; i < static_cast<int>(n); ++i) {
       const int cell = surface->node_cell[static_cast<std::size_t>(i)];
+      const auto block = c.block(i, j);
       for (int a = 0; a < 3; ++a) {
         double& bound = surface->cell_axis_bound_m_per_n(3 * cell + a, j);
-        bound = std::max(bound, c.block<1, 3>(3 * i + a, 3 * j).norm());
+        bound = std::max(bound, block.row(a).norm());
       }
     }
   }
@@ -223,9 +228,12 @@ TwoBodyModel::TwoBodyModel(SceneSpec scene, std::size_t max_operator_bytes)
   stats_.compliance_seconds = compliance.ElapsedSeconds();
   rigid_contact_compliance_m_per_n_ = std::numeric_limits<double>::infinity();
   for (const ContactSurface* surface : {&obstacle_surface_, &tool_surface_}) {
-    const Eigen::VectorXd diagonal = surface->compliance_m_per_n.diagonal();
-    for (Eigen::Index i = 0; i < diagonal.size(); ++i) {
-      if (diagonal[i] > 0.0) rigid_contact_compliance_m_per_n_ = std::min(rigid_contact_compliance_m_per_n_, diagonal[i]);
+    const BlockedCompliance& c = surface->compliance_m_per_n;
+    for (int i = 0; i < c.nodes(); ++i) {
+      for (int a = 0; a < 3; ++a) {
+        const double diagonal = c.block(i, i)(a, a);
+        if (diagonal > 0.0) rigid_contact_compliance_m_per_n_ = std::min(rigid_contact_compliance_m_per_n_, diagonal);
+      }
     }
   }
   if (!std::isfinite(rigid_contact_compliance_m_per_n_)) {
@@ -238,9 +246,8 @@ TwoBodyModel::TwoBodyModel(SceneSpec scene, std::size_t max_operator_bytes)
   for (int i = 0; i < static_cast<int>(tool_nodes.size()); ++i) {
     tool_unit_fields_.middleRows(3 * i, 3) = fields.middleRows(3 * tool_nodes[static_cast<std::size_t>(i)], 3);
   }
-  stats_.operator_bytes =
-      sizeof(double) * static_cast<std::size_t>(obstacle_surface_.compliance_m_per_n.size() +
-                                                tool_surface_.compliance_m_per_n.size() + tool_unit_fields_.size());
+  stats_.operator_bytes = obstacle_surface_.compliance_m_per_n.bytes() + tool_surface_.compliance_m_per_n.bytes() +
+                          sizeof(double) * static_cast<std::size_t>(tool_unit_fields_.size());
   stats_.total_seconds = stats_.build_seconds + total.ElapsedSeconds();
 }
 

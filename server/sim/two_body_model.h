@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "fem/elastic_body.h"
+#include "sim/blocked_compliance.h"
 #include "sim/collision.h"
 #include "sim/scene.h"
 
@@ -43,8 +44,9 @@ struct ContactSurface {
   // plain mean for midsides (Thürmer & Wüthrich pseudo-normals).
   std::vector<Eigen::Vector3d> node_normals;
   std::vector<char> on_sharp_edge;  // per node: lies on a sharp edge or corner
-  // Compliance among the surface nodes (3n x 3n, m/N), ordered as `nodes`.
-  Eigen::MatrixXd compliance_m_per_n;
+  // Compliance among the surface nodes (3n x 3n, m/N), ordered as `nodes`, stored as one
+  // contiguous 3x3 block per node pair for the 1 kHz step (BlockedCompliance).
+  BlockedCompliance compliance_m_per_n;
   double longest_edge_m = 0.0;  // longest face edge, m
   // Reference bounding box of each face, m.
   std::vector<Eigen::Vector3d> triangle_min_m, triangle_max_m;
@@ -91,8 +93,8 @@ class TwoBodyModel {
   const std::vector<int>& tool_candidates() const { return tool_surface_.nodes; }
   const std::vector<int>& tool_candidate_index() const { return tool_surface_.node_index; }
   const std::vector<Eigen::Vector3d>& tool_candidate_normals() const { return tool_surface_.node_normals; }
-  const Eigen::MatrixXd& obstacle_compliance_m_per_n() const { return obstacle_surface_.compliance_m_per_n; }
-  const Eigen::MatrixXd& tool_compliance_m_per_n() const { return tool_surface_.compliance_m_per_n; }
+  const BlockedCompliance& obstacle_compliance_m_per_n() const { return obstacle_surface_.compliance_m_per_n; }
+  const BlockedCompliance& tool_compliance_m_per_n() const { return tool_surface_.compliance_m_per_n; }
 
   // Obstacle nodes on sharp edges and corners (ids, sorted) with their normals: the slaves of
   // the reverse pass (obstacle node against tool face), which catches an obstacle edge or

@@ -1,6 +1,7 @@
 // hapco-scene: load a scene file, mesh and factor its bodies once, and print what a user
 // wants to check before running it (sizes, costs, sanity checks). Thin: the work is in the
 // libraries (design.md, example 14).
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -113,14 +114,19 @@ int Run(int argc, char** argv) {
                 t.nodes.size());
     std::printf("precomputed, %.2f s (compliance %.2f s, batched CHOLMOD solves):\n", watch.ElapsedSeconds(),
                 model.stats().compliance_seconds);
-    std::printf("          obstacle compliance %ldx%ld dense, %.1f MiB\n", o.compliance_m_per_n.rows(),
-                o.compliance_m_per_n.cols(), mib(dense_bytes(o.compliance_m_per_n)));
-    std::printf("          tool compliance %ldx%ld dense, %.2f MiB; tool unit fields %ldx3, %.3f MiB\n",
-                t.compliance_m_per_n.rows(), t.compliance_m_per_n.cols(), mib(dense_bytes(t.compliance_m_per_n)),
+    const auto largest_diagonal = [](const hapco::sim::BlockedCompliance& c) {
+      double largest = 0.0;
+      for (int i = 0; i < c.nodes(); ++i) largest = std::max(largest, c.block(i, i).diagonal().maxCoeff());
+      return largest;
+    };
+    std::printf("          obstacle compliance %dx%d (3x3 blocks per node pair), %.1f MiB\n",
+                3 * o.compliance_m_per_n.nodes(), 3 * o.compliance_m_per_n.nodes(), mib(o.compliance_m_per_n.bytes()));
+    std::printf("          tool compliance %dx%d, %.2f MiB; tool unit fields %ldx3, %.3f MiB\n",
+                3 * t.compliance_m_per_n.nodes(), 3 * t.compliance_m_per_n.nodes(), mib(t.compliance_m_per_n.bytes()),
                 model.tool_unit_fields().rows(), mib(dense_bytes(model.tool_unit_fields())));
     std::printf("          total operators %.1f MiB; largest obstacle compliance %.3g m/N; rigid-contact "
                 "compliance %.3g m/N\n",
-                mib(model.stats().operator_bytes), o.compliance_m_per_n.diagonal().maxCoeff(),
+                mib(model.stats().operator_bytes), largest_diagonal(o.compliance_m_per_n),
                 model.rigid_contact_compliance_m_per_n());
     const std::string note = hapco::sim::StartingPositionNote(model);
     if (!note.empty()) std::printf("note      %s\n", note.c_str());

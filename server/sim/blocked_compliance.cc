@@ -1,0 +1,38 @@
+#include "sim/blocked_compliance.h"
+
+#include "common/error.h"
+
+namespace hapco::sim {
+
+BlockedCompliance::BlockedCompliance(int nodes) : nodes_(nodes) {
+  HAPCO_ASSERT(nodes >= 0, "BlockedCompliance: negative node count");
+  const std::size_t count = 9 * static_cast<std::size_t>(nodes_) * static_cast<std::size_t>(nodes_);
+  data_ = std::make_unique<double[]>(count);  // value-initialised: zero
+}
+
+BlockedCompliance::BlockedCompliance(const Eigen::MatrixXd& compliance_m_per_n)
+    : BlockedCompliance(static_cast<int>(compliance_m_per_n.cols() / 3)) {
+  HAPCO_ASSERT(compliance_m_per_n.rows() == compliance_m_per_n.cols() && compliance_m_per_n.rows() % 3 == 0,
+               "BlockedCompliance: C must be square with 3 rows per node");
+  for (Eigen::Index c = 0; c < compliance_m_per_n.cols(); ++c) SetColumn(static_cast<int>(c), compliance_m_per_n.col(c));
+}
+
+void BlockedCompliance::SetColumn(int column, const Eigen::Ref<const Eigen::VectorXd>& values_m_per_n) {
+  HAPCO_ASSERT(column >= 0 && column < 3 * nodes_ && values_m_per_n.size() == 3 * nodes_,
+               "BlockedCompliance::SetColumn: column or length out of range");
+  const int j = column / 3, b = column % 3;
+  for (int i = 0; i < nodes_; ++i) {
+    double* block = data_.get() + Offset(i, j);
+    for (int a = 0; a < 3; ++a) block[3 * b + a] = values_m_per_n[3 * i + a];
+  }
+}
+
+Eigen::MatrixXd BlockedCompliance::ToDense() const {
+  Eigen::MatrixXd dense(3 * nodes_, 3 * nodes_);
+  for (int j = 0; j < nodes_; ++j) {
+    for (int i = 0; i < nodes_; ++i) dense.block<3, 3>(3 * i, 3 * j) = block(i, j);
+  }
+  return dense;
+}
+
+}  // namespace hapco::sim

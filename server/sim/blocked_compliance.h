@@ -1,0 +1,48 @@
+#pragma once
+
+#include <cstddef>
+#include <memory>
+
+#include <Eigen/Dense>
+
+namespace hapco::sim {
+
+// A surface compliance C (3n x 3n, m/N) stored for the 1 kHz step: the 3x3 block C(i, j) of
+// each node pair as 9 consecutive doubles (column-major), blocks of one column j consecutive
+// in i: block (i, j) at 9·(j·n + i).
+//
+// Why not a dense column-major matrix: a step reads C among the ~100 surface nodes near the
+// tool (the broad phase's U = C f and the W gather of algorithms.md §5), scattered over a
+// matrix far larger than the L2 cache. There a 3x3 block spans three columns 24n bytes apart,
+// i.e. three or more cache lines, and the step's cost was those misses, not the arithmetic
+// (docs/performance.md). Here a block is 72 contiguous bytes (at most two lines) and a run of
+// consecutive nodes is one stream. Same values, same bytes, same precision as the dense C.
+class BlockedCompliance {
+ public:
+  BlockedCompliance() = default;
+  // n x n zero blocks (n nodes); fill with SetColumn.
+  explicit BlockedCompliance(int nodes);
+  // From a dense 3n x 3n compliance (tests, small bodies).
+  explicit BlockedCompliance(const Eigen::MatrixXd& compliance_m_per_n);
+
+  // Column c = 3j + b of C (length 3n): the blocks (·, j), column b.
+  void SetColumn(int column, const Eigen::Ref<const Eigen::VectorXd>& values_m_per_n);
+
+  int nodes() const { return nodes_; }
+  std::size_t bytes() const { return sizeof(double) * 9 * static_cast<std::size_t>(nodes_) * static_cast<std::size_t>(nodes_); }
+  // C(i, j), m/N: displacement of node i per unit force at node j.
+  Eigen::Map<const Eigen::Matrix3d> block(int i, int j) const {
+    return Eigen::Map<const Eigen::Matrix3d>(data_.get() + Offset(i, j));
+  }
+  // The dense matrix again (tests and small bodies only: allocates 72 n² bytes).
+  Eigen::MatrixXd ToDense() const;
+
+ private:
+  std::size_t Offset(int i, int j) const {
+    return 9 * (static_cast<std::size_t>(j) * static_cast<std::size_t>(nodes_) + static_cast<std::size_t>(i));
+  }
+  int nodes_ = 0;
+  std::unique_ptr<double[]> data_;
+};
+
+}  // namespace hapco::sim
