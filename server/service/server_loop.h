@@ -1,8 +1,9 @@
 #pragma once
 // The hapco-server loop: one thread that waits on a WaitSet (pose data, session control,
 // wake-up guard, status period), takes every available pose, keeps the newest per client
-// (older ones are superseded = dropped, counted), steps each client's session once and
-// publishes its force. Sessions are created here, in the server's own thread, never in a
+// (older ones are superseded = dropped, counted), then steps the sessions that got a pose on
+// a pool of threads (ServerOptions::threads; sessions are independent and share only the
+// immutable model) and each worker publishes the force of the session it stepped. Sessions are created here, in the server's own thread, never in a
 // DDS listener (platform-notes.md: no entity creation inside a listener).
 // Bad input is counted, logged at most once per second per kind, and never fatal.
 #include <atomic>
@@ -14,6 +15,7 @@
 #include <string>
 #include <vector>
 
+#include "common/work_pool.h"
 #include "hapco_types.h"
 #include "service/dds.h"
 #include "service/session.h"
@@ -25,6 +27,7 @@ struct ServerOptions {
   std::string server_id = "hapco-server";
   double status_period_s = 1.0;  // ServerStatus period, s
   int max_sessions = 16;         // clients beyond this are refused (counted as unknown)
+  int threads = 1;               // threads stepping sessions, the server thread included (>= 1)
   PoseLimits limits;
   // Solver wall-clock budget per step, s (0 = none); < 0 keeps the scene's. A step that
   // runs out returns SOLVER_TIME_BUDGET_EXCEEDED with the forces it has.
@@ -50,6 +53,7 @@ struct ServerCounters {
   uint64_t sessions_closed = 0;
   uint64_t status_published = 0;
   uint64_t poses_after_leave = 0;   // poses of a client that left, ignored until it joins again
+  uint64_t parallel_batches = 0;    // ticks that stepped two or more sessions on the pool
 };
 
 class ServerLoop {
@@ -115,6 +119,9 @@ class ServerLoop {
   // Counters of sessions closed so far (live sessions are added on demand).
   SessionCounters closed_session_counters_;
   std::vector<double> step_times_us_;  // this status period
+  WorkPool pool_;
+  std::vector<Client*> stepping_;   // the sessions stepped in this batch (capacity max_sessions)
+  std::vector<int64_t> step_ns_;    // their step+publish times, ns
   int64_t start_ns_ = 0;
   int64_t last_status_ns_ = 0, last_status_cpu_ns_ = 0;  // for ServerStatus.cpu_use
   std::vector<int64_t> last_log_ns_;

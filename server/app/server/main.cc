@@ -14,6 +14,7 @@
 #include "common/cli.h"
 #include "common/error.h"
 #include "common/realtime.h"
+#include "common/work_pool.h"
 #include "common/stop_signals.h"
 #include "common/timer.h"
 #include "io/scene_file.h"
@@ -39,6 +40,9 @@ Guide: docs/haptic-service.md.
                       (loopback: CYCLONEDDS_URI=file://.../docker/cyclonedds-loopback.xml)
   --status-period S   ServerStatus period, s (default 1)
   --max-sessions N    open sessions at most (default 16); further clients are refused
+  --threads N         threads stepping sessions, the server thread included (default: one
+                      per online core); sessions that got a pose in the same tick are stepped
+                      in parallel, each worker publishing the force of the session it stepped
   --max-jump-m X      largest plausible position change per pose, m (default 0.002);
                       a larger jump is ignored (the client keeps its last force)
   --workspace-m X     poses with |position| > X m are ignored (default 0.1)
@@ -93,6 +97,7 @@ std::vector<std::string> ReadSceneList(const std::string& list_path) {
 
 Options Parse(int argc, char** argv) {
   Options options;
+  options.server.threads = hapco::WorkPool::DefaultThreads();
   for (int i = 1; i < argc; ++i) {
     const std::string arg = argv[i];
     auto value = [&]() -> const char* {
@@ -108,6 +113,8 @@ Options Parse(int argc, char** argv) {
       options.server.status_period_s = hapco::cli::ParsePositive("--status-period", value());
     } else if (arg == "--max-sessions") {
       options.server.max_sessions = static_cast<int>(hapco::cli::ParseInteger("--max-sessions", value(), 1, 1000));
+    } else if (arg == "--threads") {
+      options.server.threads = static_cast<int>(hapco::cli::ParseInteger("--threads", value(), 1, 256));
     } else if (arg == "--max-jump-m") {
       options.server.limits.max_jump_m = hapco::cli::ParsePositive("--max-jump-m", value());
     } else if (arg == "--workspace-m") {
@@ -162,8 +169,9 @@ int Run(const Options& options) {
   }
   hapco::UseRealtimePriority(options.rt_priority, "hapco-server");
   hapco::service::ServerLoop server(served, options.domain, server_options);
-  std::printf("hapco-server: scene%s %s, domain %d, ready in %.2f s\n", served.size() > 1 ? "s" : "",
-              scenes_line.c_str(), options.domain, setup.ElapsedSeconds());
+  std::printf("hapco-server: scene%s %s, domain %d, %d stepping thread%s, ready in %.2f s\n",
+              served.size() > 1 ? "s" : "", scenes_line.c_str(), options.domain, server_options.threads,
+              server_options.threads > 1 ? "s" : "", setup.ElapsedSeconds());
   std::fflush(stdout);
 
   const auto watching = stop_signals.Watch([&server] { server.RequestStop(); });

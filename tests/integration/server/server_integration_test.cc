@@ -16,6 +16,7 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <memory>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -174,6 +175,80 @@ TEST(ServerProcess, FreePathOffTheScriptedFootprintGetsTheOfflineForces) {
   }
   EXPECT_GE(compared, 270);
   EXPECT_GT(last.z(), 0.5) << "pressed 2 mm, 30 mm off the scripted footprint: " << last.transpose();
+}
+
+// Parallel stepping (--threads 3): four phantoms on different free paths at 1 kHz, so most
+// ticks step several sessions at once on the pool. Every force sent is bit for bit a replay of
+// that client's stepped poses on one thread, and the clients received exactly what was sent.
+TEST(ServerProcess, SessionsSteppedOnSeveralThreadsGetTheForcesOfASingleThreadReplay) {
+  const std::string dir = TestDir();
+  const std::string domain = std::to_string(SetUpTestDomain());
+  const int clients = 4;
+  for (int c = 0; c < clients; ++c) {
+    std::ofstream path(dir + "/path" + std::to_string(c) + ".csv");
+    path << "x_m,y_m,z_m\n";
+    const double depth_m = 0.001 + 0.0005 * c;
+    for (int k = 1; k <= 20; ++k) path << 0 << "," << 0 << "," << -depth_m * k / 20 << "\n";
+    for (int k = 1; k <= 380; ++k) path << (c % 2 == 0 ? -1e-4 : 1e-4) * k << "," << 2e-5 * c * k << "," << -depth_m << "\n";
+  }
+  Process server({HAPCO_SERVER_EXE, kScene, "--domain", domain, "--threads", "3", "--trace", dir + "/trace.csv"},
+                 dir + "/server.out", dir + "/server.err");
+  {
+    std::vector<std::unique_ptr<Process>> phantoms;
+    for (int c = 0; c < clients; ++c) {
+      const std::string id = "par-" + std::to_string(c);
+      phantoms.push_back(std::make_unique<Process>(
+          std::vector<std::string>{HAPCO_PHANTOM_EXE, kScene, "--client-id", id, "--domain", domain, "--trajectory",
+                                   dir + "/path" + std::to_string(c) + ".csv", "--csv", dir + "/" + id + ".csv",
+                                   "--connect-timeout-s", "60"},
+          dir + "/" + id + ".out", dir + "/" + id + ".err"));
+    }
+    for (int c = 0; c < clients; ++c) {
+      ASSERT_EQ(phantoms[static_cast<std::size_t>(c)]->Wait(120'000), 0)
+          << ReadFile(dir + "/par-" + std::to_string(c) + ".err");
+    }
+  }
+  server.Signal(SIGTERM);
+  ASSERT_EQ(server.Wait(30'000), 0) << ReadFile(dir + "/server.err");
+  const std::string summary = ReadFile(dir + "/server.out");
+  std::printf("%s", summary.c_str());
+  ASSERT_NE(summary.find("on 3 threads"), std::string::npos) << summary;
+  // "N steps (M ticks stepped several sessions on 3 threads)": the parallel path really ran.
+  const auto open = summary.find(" steps (");
+  ASSERT_NE(open, std::string::npos) << summary;
+  EXPECT_GT(std::stoll(summary.substr(open + 8)), 20) << summary;
+
+  const sim::TwoBodyModel model(io::LoadSceneFile(kScene));
+  std::map<std::string, std::unique_ptr<sim::TwoBodySession>> replays;
+  std::map<std::string, std::map<uint64_t, Eigen::Vector3d>> sent;
+  for (const auto& row : ReadCsv(dir + "/trace.csv")) {
+    const std::string& id = row.at("client_id");
+    auto& replay = replays[id];
+    if (!replay) replay = std::make_unique<sim::TwoBodySession>(model);
+    const Eigen::Vector3d expected = replay->Step(Vec(row, "x_m", "y_m", "z_m")).device_force_n;
+    const Eigen::Vector3d force = Vec(row, "fx_n", "fy_n", "fz_n");
+    const uint64_t s = std::stoull(row.at("sequence"));
+    EXPECT_EQ(force, expected) << id << " step " << s;  // %.17g in the trace: exact
+    sent[id][s] = force;
+  }
+  ASSERT_EQ(replays.size(), static_cast<std::size_t>(clients));
+  for (int c = 0; c < clients; ++c) {
+    const std::string id = "par-" + std::to_string(c);
+    EXPECT_GE(sent[id].size(), 340u) << id << ": most of the 400 poses are stepped";
+    int received = 0;
+    double peak_n = 0.0;
+    for (const auto& row : ReadCsv(dir + "/" + id + ".csv")) {
+      const long long s = std::stoll(row.at("force_sequence"));
+      if (s < 0) continue;
+      ASSERT_TRUE(sent[id].count(static_cast<uint64_t>(s))) << id << " " << s;
+      const Eigen::Vector3d force = Vec(row, "raw_fx_n", "raw_fy_n", "raw_fz_n");
+      EXPECT_EQ(force, sent[id][static_cast<uint64_t>(s)]) << id << " " << s;
+      peak_n = std::max(peak_n, force.norm());
+      ++received;
+    }
+    EXPECT_GE(received, 330) << id;
+    EXPECT_GT(peak_n, 0.5) << id << " pressed into the bar";
+  }
 }
 
 // Bad input from a client the test plays itself (NaN, invalid id, out of workspace, jump,
