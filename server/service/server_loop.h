@@ -28,6 +28,7 @@ struct ServerOptions {
   double status_period_s = 1.0;  // ServerStatus period, s
   int max_sessions = 16;         // clients beyond this are refused (counted as unknown)
   int threads = 1;               // threads stepping sessions, the server thread included (>= 1)
+  SessionPhysics physics = SessionPhysics::kContact;  // kNone: the load tests' zero-cost floor
   PoseLimits limits;
   // Solver wall-clock budget per step, s (0 = none); < 0 keeps the scene's. A step that
   // runs out returns SOLVER_TIME_BUDGET_EXCEEDED with the forces it has.

@@ -30,8 +30,10 @@ hapco_idl_Vec3 ToIdl(const Eigen::Vector3d& v) { return {v.x(), v.y(), v.z()}; }
 Session::Session(std::string client_id, const sim::TwoBodyModel& model,
                  const Participant& participant,
                  const Topic<hapco_idl_FeedbackForce>& force_topic,
-                 const Topic<hapco_idl_ContactStateFrame>& contact_topic, double time_budget_s)
+                 const Topic<hapco_idl_ContactStateFrame>& contact_topic, double time_budget_s,
+                 SessionPhysics physics)
     : client_id_(std::move(client_id)),
+      physics_(physics),
       sim_(model),
       publisher_(participant, ClientPartition(client_id_)),
       force_writer_(publisher_, force_topic),
@@ -75,7 +77,8 @@ int64_t Session::StepAndPublish(const hapco_idl_DevicePose& pose, int64_t receiv
   have_pose_ = true;
   last_sequence_ = pose.sequence_number;
   last_position_m_ = p;
-  const sim::StepOutput& out = sim_.Step(p);
+  static const sim::StepOutput kNoPhysics{};  // zero force, no contact, step 0
+  const sim::StepOutput& out = physics_ == SessionPhysics::kContact ? sim_.Step(p) : kNoPhysics;
   ++counters_.steps;
   Eigen::Vector3d force_n = out.device_force_n;
   if (!force_n.allFinite()) {
@@ -118,6 +121,10 @@ int64_t Session::StepAndPublish(const hapco_idl_DevicePose& pose, int64_t receiv
 void Session::FillContactFrame(uint64_t pose_sequence) {
   frame_->step = counters_.steps;
   frame_->pose_sequence = pose_sequence;
+  if (physics_ == SessionPhysics::kNone) {
+    frame_->contacts._length = 0;
+    return;
+  }
   const auto& contacts = sim_.contacts();
   const uint32_t capacity = frame_->contacts._maximum;
   if (contacts.size() > capacity) ++counters_.contacts_truncated;

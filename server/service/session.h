@@ -33,13 +33,20 @@ struct SessionCounters {
                                        // network, or overwritten in the reader
 };
 
+// What a session computes per pose. kNone is the load tests' floor: the same DDS path,
+// QoS, validation and samples (a force and an empty contact frame per pose), no contact
+// computation and a zero force, so `capacity(contact) / capacity(none)` says how much of the
+// server's limit is the physics (scripts/loadtest-capacity).
+enum class SessionPhysics { kContact, kNone };
+
 class Session {
  public:
   // Throws DdsError if the writers cannot be created. time_budget_s >= 0 replaces the scene's
   // solver time budget (the haptic deadline; 0 = none), < 0 keeps the scene's.
   Session(std::string client_id, const sim::TwoBodyModel& model, const Participant& participant,
           const Topic<hapco_idl_FeedbackForce>& force_topic,
-          const Topic<hapco_idl_ContactStateFrame>& contact_topic, double time_budget_s = -1.0);
+          const Topic<hapco_idl_ContactStateFrame>& contact_topic, double time_budget_s = -1.0,
+          SessionPhysics physics = SessionPhysics::kContact);
 
   const std::string& client_id() const { return client_id_; }
 
@@ -65,6 +72,7 @@ class Session {
   void FillContactFrame(uint64_t pose_sequence);
 
   std::string client_id_;
+  SessionPhysics physics_;
   sim::TwoBodySession sim_;
   Publisher publisher_;
   Writer<hapco_idl_FeedbackForce> force_writer_;

@@ -43,6 +43,8 @@ Guide: docs/haptic-service.md.
   --threads N         threads stepping sessions, the server thread included (default: one
                       per online core); sessions that got a pose in the same tick are stepped
                       in parallel, each worker publishing the force of the session it stepped
+  --physics P         contact (default) | none: the zero-cost floor for load tests (same
+                      DDS path, sessions and samples, no contact computation, zero force)
   --max-jump-m X      largest plausible position change per pose, m (default 0.002);
                       a larger jump is ignored (the client keeps its last force)
   --workspace-m X     poses with |position| > X m are ignored (default 0.1)
@@ -115,6 +117,15 @@ Options Parse(int argc, char** argv) {
       options.server.max_sessions = static_cast<int>(hapco::cli::ParseInteger("--max-sessions", value(), 1, 1000));
     } else if (arg == "--threads") {
       options.server.threads = static_cast<int>(hapco::cli::ParseInteger("--threads", value(), 1, 256));
+    } else if (arg == "--physics") {
+      const std::string physics = value();
+      if (physics == "contact") {
+        options.server.physics = hapco::service::SessionPhysics::kContact;
+      } else if (physics == "none") {
+        options.server.physics = hapco::service::SessionPhysics::kNone;
+      } else {
+        throw hapco::InputError("--physics expects contact or none, got '" + physics + "'");
+      }
     } else if (arg == "--max-jump-m") {
       options.server.limits.max_jump_m = hapco::cli::ParsePositive("--max-jump-m", value());
     } else if (arg == "--workspace-m") {
@@ -169,9 +180,11 @@ int Run(const Options& options) {
   }
   hapco::UseRealtimePriority(options.rt_priority, "hapco-server");
   hapco::service::ServerLoop server(served, options.domain, server_options);
-  std::printf("hapco-server: scene%s %s, domain %d, %d stepping thread%s, ready in %.2f s\n",
+  std::printf("hapco-server: scene%s %s, domain %d, %d stepping thread%s%s, ready in %.2f s\n",
               served.size() > 1 ? "s" : "", scenes_line.c_str(), options.domain, server_options.threads,
-              server_options.threads > 1 ? "s" : "", setup.ElapsedSeconds());
+              server_options.threads > 1 ? "s" : "",
+              server_options.physics == hapco::service::SessionPhysics::kNone ? ", physics none (zero force)" : "",
+              setup.ElapsedSeconds());
   std::fflush(stdout);
 
   const auto watching = stop_signals.Watch([&server] { server.RequestStop(); });

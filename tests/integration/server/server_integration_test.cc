@@ -16,6 +16,7 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <set>
 #include <memory>
 #include <sstream>
 #include <string>
@@ -249,6 +250,39 @@ TEST(ServerProcess, SessionsSteppedOnSeveralThreadsGetTheForcesOfASingleThreadRe
     EXPECT_GE(received, 330) << id;
     EXPECT_GT(peak_n, 0.5) << id << " pressed into the bar";
   }
+}
+
+// The load tests' floor (--physics none): the same sessions and samples, every stepped pose
+// answered, with a zero force, and the server says what it runs.
+TEST(ServerProcess, PhysicsNoneAnswersEveryStepWithAZeroForce) {
+  const std::string dir = TestDir();
+  const std::string domain = std::to_string(SetUpTestDomain());
+  Process server({HAPCO_SERVER_EXE, kScene, "--domain", domain, "--physics", "none", "--trace", dir + "/trace.csv"},
+                 dir + "/server.out", dir + "/server.err");
+  {
+    Process phantom({HAPCO_PHANTOM_EXE, kScene, "--client-id", "floor-1", "--domain", domain, "--csv",
+                     dir + "/phantom.csv", "--connect-timeout-s", "60"},
+                    dir + "/phantom.out", dir + "/phantom.err");
+    ASSERT_EQ(phantom.Wait(120'000), 0) << ReadFile(dir + "/phantom.err");
+  }
+  server.Signal(SIGTERM);
+  ASSERT_EQ(server.Wait(30'000), 0) << ReadFile(dir + "/server.err");
+  EXPECT_NE(ReadFile(dir + "/server.out").find("physics none"), std::string::npos) << ReadFile(dir + "/server.out");
+  std::set<uint64_t> stepped;
+  for (const auto& row : ReadCsv(dir + "/trace.csv")) {
+    EXPECT_EQ(Vec(row, "fx_n", "fy_n", "fz_n"), Eigen::Vector3d::Zero());
+    stepped.insert(std::stoull(row.at("sequence")));
+  }
+  EXPECT_GE(stepped.size(), 280u) << "of the scene's 310 poses";
+  int received = 0;
+  for (const auto& row : ReadCsv(dir + "/phantom.csv")) {
+    const long long s = std::stoll(row.at("force_sequence"));
+    if (s < 0) continue;
+    EXPECT_TRUE(stepped.count(static_cast<uint64_t>(s))) << s;
+    EXPECT_EQ(Vec(row, "raw_fx_n", "raw_fy_n", "raw_fz_n"), Eigen::Vector3d::Zero()) << s;
+    ++received;
+  }
+  EXPECT_GE(received, 270);
 }
 
 // Bad input from a client the test plays itself (NaN, invalid id, out of workspace, jump,
