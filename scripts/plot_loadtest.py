@@ -108,24 +108,33 @@ def plot_run(args):
 
 
 def plot_capacity(args):
-    rows = [r for r in read_csv(args.csv)]
-    n = [num(r, "clients") for r in rows]
+    rows = read_csv(args.csv)
+    # One series per server: hapco (the contact physics) and floor (--physics none), if run.
+    servers = []
+    for r in rows:
+        if r.get("server", "hapco") not in servers:
+            servers.append(r.get("server", "hapco"))
+    by_server = {k: [r for r in rows if r.get("server", "hapco") == k] for k in servers}
+    styles = {"hapco": "-", "floor": "--"}
+
     fig, ax = plt.subplots(figsize=(5, 3.2))
-    for key, label in (("rt_p50_us", "p50"), ("rt_p99_us", "p99"), ("rt_p999_us", "p99.9")):
-        ax.plot(n, [num(r, key) / 1000 for r in rows], "o-", label=label)
+    for k, rs in by_server.items():
+        n = [num(r, "clients") for r in rs]
+        for key, label, marker in (("rt_p50_us", "p50", "o"), ("rt_p99_us", "p99", "s"), ("rt_p999_us", "p99.9", "^")):
+            ax.plot(n, [num(r, key) / 1000 for r in rs], marker + styles.get(k, ":"), label="%s %s" % (k, label))
     ax.axhline(1.0, color="grey", lw=0.6, ls="--")
     ax.set_yscale("log")
     ax.set_xlabel("clients N (benchmark 1, 1 kHz each)")
     ax.set_ylabel("round trip, ms")
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend()
+    ax.legend(fontsize=7)
     save(fig, args.out + "-roundtrip.png")
 
     fig, ax = plt.subplots(figsize=(5, 3.2))
-    ax.plot(n, [num(r, "lost_pct") for r in rows], "o-", label="lost: missed + never answered")
-    ax.plot(n, [num(r, "missed_pct") for r in rows], "s--", label="servo ticks missed (client)")
-    ax.plot(n, [100.0 * num(r, "ticks_without_fresh_force") / max(1.0, num(r, "poses")) for r in rows], "^:",
-            label="ticks without a new force")
+    for k, rs in by_server.items():
+        n = [num(r, "clients") for r in rs]
+        ax.plot(n, [num(r, "lost_pct") for r in rs], "o" + styles.get(k, ":"), label="%s: lost (missed + never answered)" % k)
+        ax.plot(n, [num(r, "missed_pct") for r in rs], "s" + styles.get(k, ":"), label="%s: servo ticks missed" % k)
     ax.axhline(1.0, color="r", lw=0.8, label="1 % limit")
     ax.set_xlabel("clients N")
     ax.set_ylabel("% of ticks")
@@ -136,28 +145,33 @@ def plot_capacity(args):
     save(fig, args.out + "-missed.png")
 
     fig, ax = plt.subplots(figsize=(5, 3.2))
-    ax.plot(n, [num(r, "server_step_p50_us") for r in rows], "o-", label="step p50")
-    ax.plot(n, [num(r, "server_step_p99_us") for r in rows], "s-", label="step p99")
+    ax2 = ax.twinx()
+    for k, rs in by_server.items():
+        n = [num(r, "clients") for r in rs]
+        ax.plot(n, [num(r, "server_step_p50_us") for r in rs], "o" + styles.get(k, ":"), label="%s step p50" % k)
+        ax.plot(n, [num(r, "server_step_p99_us") for r in rs], "s" + styles.get(k, ":"), label="%s step p99" % k)
+        ax2.plot(n, [num(r, "server_cpu") for r in rs], "k^" + styles.get(k, ":"), label="%s CPU (cores)" % k)
     ax.set_xlabel("clients N")
     ax.set_ylabel("server step time, us")
     ax.grid(True, alpha=0.3)
-    ax2 = ax.twinx()
-    ax2.plot(n, [num(r, "server_cpu") for r in rows], "k^--", label="server CPU (cores)")
     ax2.set_ylabel("server CPU, cores")
     ax2.set_ylim(bottom=0)
     h1, l1 = ax.get_legend_handles_labels()
     h2, l2 = ax2.get_legend_handles_labels()
-    ax.legend(h1 + h2, l1 + l2, fontsize=7, loc="upper left")
+    ax.legend(h1 + h2, l1 + l2, fontsize=6, loc="upper left")
     save(fig, args.out + "-server.png")
 
     fig, ax = plt.subplots(figsize=(5, 3.2))
-    for r in rows:
-        path = os.path.join(args.runs_dir, "n%d" % int(num(r, "clients")), "roundtrip.csv")
+    for r in by_server.get("hapco", rows):
+        n_clients = int(num(r, "clients"))
+        path = os.path.join(args.runs_dir, "hapco-n%d" % n_clients, "roundtrip.csv")
+        if not os.path.exists(path):
+            path = os.path.join(args.runs_dir, "n%d" % n_clients, "roundtrip.csv")
         if os.path.exists(path):
             values = [v for vs in roundtrips(path).values() for v in vs]
-            cdf(ax, values, "N = %d" % int(num(r, "clients")))
+            cdf(ax, values, "N = %d" % n_clients)
     ax.set_xscale("log")
-    ax.set_xlabel("round trip, ms (all clients)")
+    ax.set_xlabel("round trip, ms (all clients, hapco)")
     ax.set_ylabel("fraction of forces")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7)
@@ -239,13 +253,14 @@ def plot_network(args):
 
 def table(args):
     if args.capacity:
-        print("| N | lost | servo missed | round trip p50 / p99 / p99.9 | server step p50 / p99 | server CPU | timeouts |")
-        print("|---|---|---|---|---|---|---|")
+        print("| server | N | lost | servo missed | round trip p50 / p99 / p99.9 | server step p50 / p99 | server CPU | timeouts | load before / after |")
+        print("|---|---|---|---|---|---|---|---|---|")
         for r in read_csv(args.capacity):
-            print("| %d | %.2f %% | %.2f %% | %.2f / %.2f / %.1f ms | %.0f / %.0f µs | %.2f | %d |" % (
-                num(r, "clients"), num(r, "lost_pct"), num(r, "missed_pct"), num(r, "rt_p50_us") / 1000,
+            print("| %s | %d | %.2f %% | %.2f %% | %.2f / %.2f / %.1f ms | %.0f / %.0f µs | %.2f | %d | %s / %s |" % (
+                r.get("server", "hapco"), num(r, "clients"), num(r, "lost_pct"), num(r, "missed_pct"), num(r, "rt_p50_us") / 1000,
                 num(r, "rt_p99_us") / 1000, num(r, "rt_p999_us") / 1000, num(r, "server_step_p50_us"),
-                num(r, "server_step_p99_us"), num(r, "server_cpu"), num(r, "server_losses")))
+                num(r, "server_step_p99_us"), num(r, "server_cpu"), num(r, "server_losses"),
+                r.get("load1_before", "-"), r.get("load1_after", "-")))
     if args.network:
         rows = read_csv(args.network)
         cases = []
