@@ -7,7 +7,9 @@
 //   - --path top-face: instead of the scene's trajectory, a 3 mm press and a 0.1 mm-step sweep
 //     over the whole top face (tool from x = 5 mm to 95 mm): the cost anywhere on the bar;
 //   - the per-scene precomputation: TwoBodyModelStats, operator bytes, peak RSS;
-//   - heap allocations per step (global operator new counted).
+//   - heap allocations per step (global operator new counted);
+//   - --cold-mib M: M MiB of other data are read between steps, as in the server, where DDS,
+//     the clients and other sessions run between two 1 kHz ticks: the step with cold caches.
 // The machine is shared: the load average is printed at start and end. Prints numbers only.
 #include <algorithm>
 #include <atomic>
@@ -66,6 +68,7 @@ struct Options {
   int steps = 0;  // 0: the whole trajectory
   std::string csv;
   std::string path = "scene";  // or "top-face"
+  int cold_mib = 0;  // MiB read between steps (0: warm caches)
 };
 
 // The device path of the run: the scene's trajectory, or the top-face sweep.
@@ -104,6 +107,17 @@ struct Series {
   }
 };
 
+// Reads and writes every cache line of *data: evicts the step's working set (a cache line is 8
+// doubles). Returns a sum so the reads are not optimised away.
+double EvictCaches(std::vector<double>* data) {
+  double sum = 0.0;
+  for (std::size_t i = 0; i < data->size(); i += 8) {
+    sum += (*data)[i];
+    (*data)[i] = sum * 1e-300;
+  }
+  return sum;
+}
+
 void PrintRow(const char* name, const std::vector<double>& v) {
   std::printf("  %-9s median %9.1f us   p99 %9.1f us   max %9.1f us\n", name, 1e6 * Percentile(v, 0.5),
               1e6 * Percentile(v, 0.99), 1e6 * Percentile(v, 1.0));
@@ -129,14 +143,18 @@ Options Parse(int argc, char** argv) {
       options.csv = value();
     } else if (arg == "--path") {
       options.path = value();
+    } else if (arg == "--cold-mib") {
+      options.cold_mib = std::max(0, std::atoi(value().c_str()));
     } else if (arg == "--help") {
-      std::printf("usage: sim_pipeline_bench [--scene FILE] [--repeats N] [--full-steps N] [--steps N] [--csv FILE] [--path scene|top-face]\n"
+      std::printf("usage: sim_pipeline_bench [--scene FILE] [--repeats N] [--full-steps N] [--steps N] [--csv FILE] [--path scene|top-face] [--cold-mib M]\n"
                   "  --repeats N     whole-trajectory runs of the precomputed mode (default 3)\n"
                   "  --full-steps N  steps timed in full-solve mode, from step 1 (default 12; 0 = skip)\n"
                   "  --steps N       trajectory steps per run (default: all)\n"
                   "  --csv FILE      per-step rows of the last precomputed run\n"
                   "  --path P        scene: the scene's trajectory (default); top-face: 3 mm press and a\n"
-                  "                  0.1 mm-step sweep over the whole top face\n");
+                  "                  0.1 mm-step sweep over the whole top face\n"
+                  "  --cold-mib M    read M MiB of other data between steps (cold caches, as in the server;\n"
+                  "                  default 0)\n");
       std::exit(0);
     } else {
       throw InputError("unknown option " + arg + " (see --help)");
@@ -172,6 +190,8 @@ int Run(const Options& options) {
   const int steps = options.steps > 0 ? std::min(options.steps, path_steps) : path_steps;
   std::printf("path %s: %d steps\n", options.path.c_str(), steps);
 
+  std::vector<double> cold(static_cast<std::size_t>(options.cold_mib) << 17);  // doubles
+  double cold_sum = 0.0;
   // Precomputed mode over the whole trajectory, `repeats` times (a fresh session each time).
   Series all;
   std::vector<double> alloc_per_step;
@@ -186,6 +206,7 @@ int Run(const Options& options) {
     sim::TwoBodySession session(model, sim::SolveMode::kPrecomputed);
     for (int step = 1; step <= steps; ++step) {
       const Eigen::Vector3d& d = path[static_cast<std::size_t>(step)];
+      if (!cold.empty()) cold_sum += EvictCaches(&cold);
       const long before = g_allocations.load();
       const sim::StepOutput& out = session.Step(d);
       const long allocations = g_allocations.load() - before;
@@ -204,8 +225,10 @@ int Run(const Options& options) {
     std::fprintf(stderr, "precomputed run %d/%d done\n", repeat + 1, options.repeats);
   }
   if (csv != nullptr) std::fclose(csv);
-  std::printf("\nprecomputed mode, %d steps x %d runs (%ld outer iterations per run):\n", steps, options.repeats,
-              outer_iterations / options.repeats);
+  std::printf("\nprecomputed mode, %d steps x %d runs (%ld outer iterations per run)%s:\n", steps, options.repeats,
+              outer_iterations / options.repeats,
+              cold.empty() ? "" : (", " + std::to_string(options.cold_mib) + " MiB read between steps").c_str());
+  if (cold_sum == 42.0) std::printf(" ");  // keeps the eviction reads
   PrintRow("step", all.step);
   PrintRow("detect", all.detect);
   PrintRow("assemble", all.assemble);
