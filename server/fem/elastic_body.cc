@@ -1,6 +1,7 @@
 #include "fem/elastic_body.h"
 
 #include <algorithm>
+#include <cmath>
 #include <iterator>
 #include <string>
 #include <utility>
@@ -93,6 +94,14 @@ ElasticBody::ElasticBody(Spec spec) : spec_(std::move(spec)) {
   CheckRigidMotionsStopped();
 
   stiffness_ = AssembleStiffness(spec_.mesh, spec_.material);
+  // Found with the scene fuzz harness: E = 1e308 Pa on a 100 m box overflows to inf entries, and
+  // CHOLMOD factors such a matrix without complaint (every later solve is NaN).
+  for (Eigen::Index k = 0; k < stiffness_.nonZeros(); ++k) {
+    if (!std::isfinite(stiffness_.valuePtr()[k])) {
+      throw InputError("stiffness has non-finite entries: Young's modulus times the element size "
+                       "overflows (give the material and the box in SI units, within physical ranges)");
+    }
+  }
   const int dofs = num_dofs();
   dof_to_free_.assign(static_cast<std::size_t>(dofs), 0);
   for (const auto* list : {&spec_.clamped_nodes, &spec_.driven_nodes})

@@ -97,6 +97,11 @@ std::vector<recording::Record> ReadRecording(const std::string& path, RecordingR
     std::size_t got = 0;
     while ((got = std::fread(chunk, 1, sizeof(chunk), file.get())) > 0) data.append(chunk, got);
   }
+  return ParseRecording(data, path, report);
+}
+
+std::vector<recording::Record> ParseRecording(std::string_view data, const std::string& path,
+                                              RecordingReadReport* report) {
   if (data.size() < sizeof(kFileMagic) || std::memcmp(data.data(), kFileMagic, sizeof(kFileMagic)) != 0) {
     throw InputError(path + " is not a HapCo recording (missing the HAPCOREC magic)");
   }

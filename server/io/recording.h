@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <memory>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "recording.pb.h"
@@ -50,5 +51,9 @@ struct RecordingReadReport {
 // Reads every complete record. Throws InputError if the file cannot be opened or does not
 // start with the recording magic (not a HapCo recording).
 std::vector<recording::Record> ReadRecording(const std::string& path, RecordingReadReport* report);
+
+// Same, from the file's bytes already in memory; `source_name` is used in messages.
+std::vector<recording::Record> ParseRecording(std::string_view data, const std::string& source_name,
+                                              RecordingReadReport* report);
 
 }  // namespace hapco::io

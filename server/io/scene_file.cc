@@ -14,6 +14,14 @@ namespace hapco::io {
 namespace {
 
 namespace pb = ::hapco::scene;
+
+// Physical ranges of a body (SI). Outside them the element integrals overflow or underflow
+// (found with the scene fuzz harness: E = 1e308 Pa on a 100 m box built a body with infinite
+// stiffness, E = 1e-320 Pa was blamed on the Dirichlet nodes).
+constexpr double kMinEdgeM = 1e-6;
+constexpr double kMaxExtentM = 10.0;
+constexpr double kMinYoungsModulusPa = 1.0;
+constexpr double kMaxYoungsModulusPa = 1e13;
 using google::protobuf::FieldDescriptor;
 using google::protobuf::Message;
 using google::protobuf::TextFormat;
@@ -127,15 +135,19 @@ class SceneChecker {
     const auto* box_tree = Nested(tree, body, "box");
     const std::string box_path = path + ".box";
     const Eigen::Vector3d size(box.size_m().x(), box.size_m().y(), box.size_m().z());
-    if (!box.has_size_m() || !(size.minCoeff() > 0.0) || !size.allFinite()) {
+    // Physical ranges, not just finite: a 1e300 m box (or 1e-300 m) overflows or underflows
+    // the element integrals, and a haptic scene spans centimetres.
+    if (!box.has_size_m() || !(size.minCoeff() >= kMinEdgeM) || !(size.maxCoeff() <= kMaxExtentM)) {
       Fail(box_path, box, box_tree, "size_m",
-           "every edge length must be a finite number > 0 m, got (" + Number(size.x()) + ", " +
-               Number(size.y()) + ", " + Number(size.z()) + ")");
+           "every edge length must be between " + Number(kMinEdgeM) + " and " +
+               Number(kMaxExtentM) + " m, got (" + Number(size.x()) + ", " + Number(size.y()) +
+               ", " + Number(size.z()) + ")");
     }
     const Eigen::Vector3d corner(box.min_corner_m().x(), box.min_corner_m().y(),
                                  box.min_corner_m().z());
-    if (!corner.allFinite()) {
-      Fail(box_path, box, box_tree, "min_corner_m", "must be finite");
+    if (!corner.allFinite() || corner.cwiseAbs().maxCoeff() > kMaxExtentM) {
+      Fail(box_path, box, box_tree, "min_corner_m",
+           "every coordinate must be finite and within " + Number(kMaxExtentM) + " m of the origin");
     }
     const char* division_fields[3] = {"divisions_x", "divisions_y", "divisions_z"};
     const unsigned divisions[3] = {box.divisions_x(), box.divisions_y(), box.divisions_z()};
@@ -156,13 +168,22 @@ class SceneChecker {
       default:
         Fail(path, body, tree, "element_order", "must be TET4 or TET10");
     }
+    // Refused here, before anything is allocated: a server would otherwise grow to many GB
+    // (or be killed) while building the body.
+    const sim::BodyBuildEstimate estimate = sim::EstimateBodyBuild(spec.box);
+    if (estimate.bytes > sim::kMaxBodyBuildBytes) {
+      Fail(box_path, box, box_tree, "divisions_x", sim::DescribeOverLimit(spec.box, estimate));
+    }
     if (!body.has_material()) Fail(path, body, tree, "material", "is missing");
     const pb::Material& material = body.material();
     const auto* material_tree = Nested(tree, body, "material");
     const std::string material_path = path + ".material";
-    if (!(material.youngs_modulus_pa() > 0.0) || !std::isfinite(material.youngs_modulus_pa())) {
+    if (!(material.youngs_modulus_pa() >= kMinYoungsModulusPa) ||
+        !(material.youngs_modulus_pa() <= kMaxYoungsModulusPa)) {
       Fail(material_path, material, material_tree, "youngs_modulus_pa",
-           "must be a finite number > 0 Pa, got " + Number(material.youngs_modulus_pa()));
+           "must be between " + Number(kMinYoungsModulusPa) + " Pa (a soft gel) and " +
+               Number(kMaxYoungsModulusPa) + " Pa (stiffer than diamond), got " +
+               Number(material.youngs_modulus_pa()));
     }
     if (!(material.poisson_ratio() > -1.0 && material.poisson_ratio() < 0.5)) {
       Fail(material_path, material, material_tree, "poisson_ratio",
@@ -255,6 +276,7 @@ class SceneChecker {
     }
     const FieldDescriptor* phases_field =
         trajectory.GetDescriptor()->FindFieldByName("phases");
+    long long total_steps = 0;
     for (int index = 0; index < trajectory.phases_size(); ++index) {
       const pb::TrajectoryPhase& phase = trajectory.phases(index);
       const auto* phase_tree = tree == nullptr ? nullptr : tree->GetTreeForNested(phases_field, index);
@@ -262,6 +284,12 @@ class SceneChecker {
       if (phase.steps() < 1 || phase.steps() > 10000000) {
         Fail(path, phase, phase_tree, "steps",
              "must be between 1 and 10000000, got " + std::to_string(phase.steps()));
+      }
+      total_steps += phase.steps();
+      if (total_steps > sim::kMaxTrajectorySteps) {
+        Fail(path, phase, phase_tree, "steps",
+             "brings the trajectory to " + std::to_string(total_steps) + " steps; at most " +
+                 std::to_string(sim::kMaxTrajectorySteps) + " in total");
       }
       const Eigen::Vector3d displacement(phase.displacement_m().x(), phase.displacement_m().y(),
                                          phase.displacement_m().z());

@@ -39,11 +39,8 @@ int Find(const std::vector<std::string>& header, const std::string& name) {
   return -1;
 }
 
-}  // namespace
-
-std::vector<Eigen::Vector3d> LoadTrajectoryCsv(const std::string& path, const std::string& client_id) {
-  std::ifstream in(path);
-  if (!in) throw InputError("cannot read trajectory " + path);
+std::vector<Eigen::Vector3d> ReadTrajectoryCsv(std::istream& in, const std::string& path,
+                                               const std::string& client_id) {
   std::vector<Eigen::Vector3d> points{Eigen::Vector3d::Zero()};
   std::array<int, 3> columns{0, 1, 2};
   int client_column = -1;
@@ -103,6 +100,20 @@ std::vector<Eigen::Vector3d> LoadTrajectoryCsv(const std::string& path, const st
     throw InputError(path + ": no trajectory rows" + (client_id.empty() ? "" : " for client " + client_id));
   }
   return points;
+}
+
+}  // namespace
+
+std::vector<Eigen::Vector3d> LoadTrajectoryCsv(const std::string& path, const std::string& client_id) {
+  std::ifstream in(path);
+  if (!in) throw InputError("cannot read trajectory " + path);
+  return ReadTrajectoryCsv(in, path, client_id);
+}
+
+std::vector<Eigen::Vector3d> ParseTrajectoryCsv(const std::string& text, const std::string& source_name,
+                                                const std::string& client_id) {
+  std::istringstream in(text);
+  return ReadTrajectoryCsv(in, source_name, client_id);
 }
 
 }  // namespace hapco::io

@@ -19,4 +19,8 @@ namespace hapco::io {
 // row, a header without position columns (naming the accepted ones), or a file without rows.
 std::vector<Eigen::Vector3d> LoadTrajectoryCsv(const std::string& path, const std::string& client_id = "");
 
+// Same, from text already in memory; `source_name` is used in messages (the fuzz harness).
+std::vector<Eigen::Vector3d> ParseTrajectoryCsv(const std::string& text, const std::string& source_name,
+                                                const std::string& client_id = "");
+
 }  // namespace hapco::io

@@ -1,6 +1,10 @@
 #include "sim/scene.h"
 
 #include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdio>
+#include <functional>
 
 #include "common/error.h"
 
@@ -40,7 +44,47 @@ int SceneSpec::PhaseOfStep(int step) const {
   return static_cast<int>(trajectory.size()) - 1;
 }
 
+std::string DescribeOverLimit(const fem::BoxMeshSpec& box, const BodyBuildEstimate& estimate) {
+  char text[200];
+  std::snprintf(text, sizeof(text),
+                "%d x %d x %d %s cells (%lld nodes) would need about %.1f GiB to build, more "
+                "than the %.0f GiB allowed; use fewer divisions",
+                box.divisions.x(), box.divisions.y(), box.divisions.z(), fem::ToString(box.order),
+                estimate.nodes, estimate.bytes / (1 << 30), kMaxBodyBuildBytes / (1 << 30));
+  return text;
+}
+
+BodyBuildEstimate EstimateBodyBuild(const fem::BoxMeshSpec& box) {
+  // Node counts per axis (corners, plus midsides for Tet10), sorted n[0] >= n[1] >= n[2].
+  const long long per_cell = box.order == fem::ElementOrder::kTet10 ? 2 : 1;
+  std::array<long long, 3> n{};
+  for (int a = 0; a < 3; ++a) n[static_cast<std::size_t>(a)] = per_cell * std::max(box.divisions[a], 1) + 1;
+  std::sort(n.begin(), n.end(), std::greater<>());
+  BodyBuildEstimate estimate;
+  estimate.nodes = n[0] * n[1] * n[2];
+  estimate.elements = 6LL * std::max(box.divisions.x(), 1) * std::max(box.divisions.y(), 1) *
+                      std::max(box.divisions.z(), 1);
+  const double dofs = 3.0 * static_cast<double>(estimate.nodes);
+  // Factor entries per dof ~ k (n1 n2)^0.8, k from 3.4 (cube) to 6.9 (long bar); fitted on
+  // Tet4 and Tet10 boxes from 21x5x5 to 121x25x25 nodes with 15 % margin.
+  const double cross_section = static_cast<double>(n[1] * n[2]);
+  const double aspect = static_cast<double>(n[1]) / static_cast<double>(n[0]);
+  const double k = 1.15 * (3.0 + 3.0 * (1.0 - aspect));
+  estimate.factor_nonzeros = dofs * k * std::pow(cross_section, 0.8);
+  // Stiffness entries per dof: measured 42 (Tet4), 82 (Tet10); 24 bytes each with assembly.
+  const double stiffness_nonzeros = dofs * (box.order == fem::ElementOrder::kTet10 ? 85.0 : 45.0);
+  // 14 bytes per factor entry (value, index, supernodal padding: measured 13.5), the
+  // stiffness, and per node its position, unit fields and bookkeeping.
+  estimate.bytes = 14.0 * estimate.factor_nonzeros + 24.0 * stiffness_nonzeros +
+                   200.0 * static_cast<double>(estimate.nodes);
+  return estimate;
+}
+
 fem::ElasticBody BuildBody(const BodySpec& body) {
+  const BodyBuildEstimate estimate = EstimateBodyBuild(body.box);
+  if (estimate.bytes > kMaxBodyBuildBytes) {
+    throw InputError("body '" + body.name + "': " + DescribeOverLimit(body.box, estimate));
+  }
   fem::ElasticBody::Spec spec;
   spec.mesh = fem::MakeBoxMesh(body.box);
   spec.material = body.material;

@@ -51,7 +51,30 @@ struct SceneSpec {
   int PhaseOfStep(int step) const;
 };
 
+// What building a body will hold, estimated from its box alone (before anything is
+// allocated). The sparse Cholesky factor dominates: its size follows a fit to CHOLMOD's
+// measured factors of box meshes (nested-dissection fill grows with the cross-section),
+// which over-estimates the measured peak by 0-2.3x (docs/fuzzing.md, "memory estimate").
+struct BodyBuildEstimate {
+  long long nodes = 0;
+  long long elements = 0;
+  double factor_nonzeros = 0.0;
+  double bytes = 0.0;  // peak resident bytes of BuildBody, approximately
+};
+BodyBuildEstimate EstimateBodyBuild(const fem::BoxMeshSpec& box);
+// "400 x 80 x 80 Tet4 cells (2627721 nodes) would need about N GiB to build, more than ...".
+std::string DescribeOverLimit(const fem::BoxMeshSpec& box, const BodyBuildEstimate& estimate);
+
+// A body whose estimate exceeds this is refused before it is built (a scene file cannot ask
+// for more memory than a server has; the dense contact operators have the same 4 GiB bound).
+inline constexpr double kMaxBodyBuildBytes = 4.0 * 1024 * 1024 * 1024;
+
+// The largest trajectory a scene may describe (steps over all phases), so that step counts
+// stay far from int overflow and DeviceTrajectory() from exhausting memory.
+inline constexpr long long kMaxTrajectorySteps = 100'000'000;
+
 // Meshes the body's box, gathers its Dirichlet nodes and factors its stiffness (once).
+// Throws InputError, before allocating, when EstimateBodyBuild exceeds kMaxBodyBuildBytes.
 fem::ElasticBody BuildBody(const BodySpec& body);
 
 }  // namespace hapco::sim

@@ -193,6 +193,15 @@ TEST(ElasticBodyInput, RejectsBadSpecsWithAClearMessage) {
   s.clamped_nodes = {0, 1, 2};  // three nodes on the y = z = min edge: collinear
   EXPECT_NE(ErrorOf(s).find("lie on one line"), std::string::npos);
 
+  // Found with the scene fuzz harness: finite inputs whose stiffness overflows to inf used to
+  // factor "successfully" (every solve NaN).
+  const BoxMeshSpec huge_box = Box(100.0, 100.0, 100.0, 1, 1, 1, ElementOrder::kTet4);
+  s = good;
+  s.mesh = MakeBoxMesh(huge_box);
+  s.clamped_nodes = NodesOnBoxFace(s.mesh, huge_box, BoxFace::kXMin);
+  s.material.youngs_modulus_pa = 1e308;
+  EXPECT_NE(ErrorOf(s).find("stiffness has non-finite entries"), std::string::npos) << ErrorOf(s);
+
   const ElasticBody body(good);
   EXPECT_THROW(body.SolveDisplacement(Eigen::VectorXd::Zero(5), Eigen::Vector3d::Zero()), InputError);
   const std::vector<int> bad = {-1};
