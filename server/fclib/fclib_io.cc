@@ -102,11 +102,16 @@ void RequireGroup(hid_t file, const std::string& path, const std::string& name) 
 
 constexpr std::size_t kMaxStringBytes = 1 << 20;  // info text, a sanity bound
 
+// Largest chunk HDF5 may have to hold in memory for one dataset of these files (libfclib
+// writes contiguous datasets; a chunked one is accepted up to this).
+constexpr std::size_t kMaxChunkBytes = 64u << 20;
+
 struct DatasetShape {
   H5T_class_t type_class = H5T_NO_CLASS;
   long points = 0;
   std::size_t type_size = 0;
   bool variable_string = false;
+  std::size_t chunk_bytes = 0;  // 0: not chunked
 };
 
 DatasetShape InspectDataset(hid_t file, const std::string& path, const std::string& name) {
@@ -123,7 +128,29 @@ DatasetShape InspectDataset(hid_t file, const std::string& path, const std::stri
   shape.points = static_cast<long>(H5Sget_simple_extent_npoints(space.get()));
   shape.variable_string =
       shape.type_class == H5T_STRING && H5Tis_variable_str(datatype.get()) > 0;
+  H5Id create_plist(H5Dget_create_plist(dataset.get()), H5Pclose);
+  if (create_plist.valid() && H5Pget_layout(create_plist.get()) == H5D_CHUNKED) {
+    hsize_t dims[H5S_MAX_RANK] = {};
+    const int rank = H5Pget_chunk(create_plist.get(), H5S_MAX_RANK, dims);
+    double bytes = static_cast<double>(shape.type_size);
+    for (int d = 0; d < rank; ++d) bytes *= static_cast<double>(dims[d]);
+    shape.chunk_bytes = rank > 0 ? static_cast<std::size_t>(std::min(bytes, 1e18)) : 0;
+  }
   return shape;
+}
+
+// Found by fuzzing (tests/data/fuzz/fclib_local/integer_type_of_4gb.h5): a corrupt datatype
+// declared 4-byte-looking integers of 4294901764 bytes each, and HDF5 allocated 4 GB per
+// element to convert them. Numbers are 1 to 8 bytes wide; chunks are bounded.
+void CheckElementStorage(const std::string& path, const std::string& name, const DatasetShape& shape) {
+  if (shape.type_size < 1 || shape.type_size > 8) {
+    Fail(path, name + " has elements of " + std::to_string(shape.type_size) +
+                   " bytes; numbers are 1 to 8 bytes wide (corrupt file?)");
+  }
+  if (shape.chunk_bytes > kMaxChunkBytes) {
+    Fail(path, name + " is stored in chunks of " + std::to_string(shape.chunk_bytes) +
+                   " bytes, more than " + std::to_string(kMaxChunkBytes) + " (corrupt file?)");
+  }
 }
 
 // Reads the whole dataset as libfclib will (same memory type), so that a dataset whose
@@ -160,6 +187,7 @@ DatasetShape RequireIntegers(hid_t file, const std::string& path, const std::str
                              long min_points, long max_points) {
   const DatasetShape shape = InspectDataset(file, path, name);
   if (shape.type_class != H5T_INTEGER) Fail(path, name + " must hold integers");
+  CheckElementStorage(path, name, shape);
   CheckPoints(path, name, shape, min_points, max_points);
   TrialRead(file, path, name, shape, H5T_NATIVE_INT, sizeof(int));
   return shape;
@@ -172,6 +200,7 @@ DatasetShape RequireNumbers(hid_t file, const std::string& path, const std::stri
   if (shape.type_class != H5T_FLOAT && shape.type_class != H5T_INTEGER) {
     Fail(path, name + " must hold numbers");
   }
+  CheckElementStorage(path, name, shape);
   CheckPoints(path, name, shape, min_points, max_points);
   TrialRead(file, path, name, shape, H5T_NATIVE_DOUBLE, sizeof(double));
   return shape;
@@ -233,6 +262,9 @@ std::size_t RequireOptionalString(hid_t file, const std::string& path,
   }
   if (shape.type_size > kMaxStringBytes) {
     Fail(path, name + " is longer than " + std::to_string(kMaxStringBytes) + " bytes");
+  }
+  if (shape.chunk_bytes > kMaxChunkBytes) {
+    Fail(path, name + " is stored in chunks of " + std::to_string(shape.chunk_bytes) + " bytes (corrupt file?)");
   }
   TrialRead(file, path, name, shape, -1, shape.type_size);
   return shape.type_size;

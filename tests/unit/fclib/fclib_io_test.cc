@@ -266,6 +266,13 @@ TEST(FclibRead, VariableLengthTitleIsRejectedNotMisread) {
   ExpectInputError(DataFile("bad_vlen_title.hdf5"), "fixed-length string");
 }
 
+// Found by fuzzing (tests/data/fuzz/fclib_local): a corrupt datatype declares W/p's integers
+// 4294901764 bytes wide; HDF5 used to allocate 4 GB per element to convert them.
+TEST(FclibRead, ImplausibleElementSizeIsRefusedBeforeReading) {
+  ExpectInputError(std::string(HAPCO_SOURCE_DIR) + "/tests/data/fuzz/fclib_local/integer_type_of_4gb.h5",
+                   "/fclib_local/W/p has elements of 4294901764 bytes");
+}
+
 // libfclib calls exit(1) when an HDF5 read fails; every such failure must be caught by the
 // checks before it. Corrupt a valid file at random bytes (fixed seed): each read returns a
 // problem or throws InputError, and the test process survives.
