@@ -236,12 +236,28 @@ void TwoBodySession::BroadPhase(const Eigen::Vector3d& increment_m) {
       region_runs_.back().second = region_[k] + 1;
     }
   }
+  // C is symmetric and the loaded slots are region slots too, so a block C(i, j) between two
+  // loaded slots serves both U_i += C(i, j) f_j and U_j += C(i, j)ᵀ f_i: it is read once, in
+  // the column of the smaller slot (most of the region is loaded: ~40 % fewer block reads).
+  const std::vector<char>& loaded = obstacle_slot_loaded_;
   for (int i : region_) obstacle_displacement_m_.segment<3>(3 * i).setZero();
   for (int j : obstacle_loaded_) {
     const Eigen::Vector3d f = Block(obstacle_slot_force_n_, j);
+    Eigen::Vector3d u_j = Eigen::Vector3d::Zero();
     for (const auto& [begin, end] : region_runs_) {
-      for (int i = begin; i < end; ++i) obstacle_displacement_m_.segment<3>(3 * i).noalias() += compliance.block(i, j) * f;
+      for (int i = begin; i < end; ++i) {
+        if (!loaded[static_cast<std::size_t>(i)]) {
+          obstacle_displacement_m_.segment<3>(3 * i).noalias() += compliance.block(i, j) * f;
+        } else if (i > j) {
+          const auto block = compliance.block(i, j);
+          obstacle_displacement_m_.segment<3>(3 * i).noalias() += block * f;
+          u_j.noalias() += block.transpose() * Block(obstacle_slot_force_n_, i);
+        } else if (i == j) {
+          u_j.noalias() += compliance.block(j, j) * f;
+        }
+      }
     }
+    obstacle_displacement_m_.segment<3>(3 * j) += u_j;
   }
   for (int i : region_) {
     const int node = obstacle_nodes[static_cast<std::size_t>(i)];
