@@ -273,6 +273,15 @@ TEST(FclibRead, ImplausibleElementSizeIsRefusedBeforeReading) {
                    "/fclib_local/W/p has elements of 4294901764 bytes");
 }
 
+// Found by fuzzing (tests/data/fuzz/fclib_local): HDF5 1.10.8 dereferences NULL in a link
+// lookup of this corrupt file (hapco-solve died with SIGSEGV). The checks run in a child
+// process first, so the reader refuses the file instead of crashing.
+TEST(FclibRead, FileThatCrashesHdf5IsRefused) {
+  const std::string file = std::string(HAPCO_SOURCE_DIR) + "/tests/data/fuzz/fclib_local/hdf5_segv_in_link_lookup.h5";
+  ExpectInputError(file, "HDF5 crashed reading the file (Segmentation fault): it is corrupt");
+  EXPECT_THROW(ReadFclibSolution(file), InputError);
+}
+
 // libfclib calls exit(1) when an HDF5 read fails; every such failure must be caught by the
 // checks before it. Corrupt a valid file at random bytes (fixed seed): each read returns a
 // problem or throws InputError, and the test process survives.
