@@ -11,6 +11,7 @@
 #include "common/error.h"
 #include "common/statistics.h"
 #include "common/realtime.h"
+#include "service/pose_intake.h"
 
 namespace hapco::service {
 namespace {
@@ -19,28 +20,6 @@ constexpr dds_attach_t kPoseToken = 1;
 constexpr dds_attach_t kSessionToken = 2;
 // Rate limiting is per kind; each pose verdict is a kind of its own (kLogBadPose + verdict).
 enum LogKind { kLogClient = 0, kLogSession = 1, kLogFailure = 2, kLogBadPose = 3, kLogKinds = kLogBadPose + 7 };
-
-// Checks that need no session state (used before a session exists).
-PoseVerdict CheckStateless(const hapco_idl_DevicePose& pose, const PoseLimits& limits) {
-  const auto& q = pose.orientation;
-  if (!std::isfinite(q.w) || !std::isfinite(q.x) || !std::isfinite(q.y) || !std::isfinite(q.z)) {
-    return PoseVerdict::kNonFinite;
-  }
-  return sim::CheckPose(Eigen::Vector3d(pose.position_m.x, pose.position_m.y, pose.position_m.z),
-                        pose.sequence_number, std::nullopt, limits);
-}
-
-// The id in a string<64> field, bounded even without a terminator.
-std::string IdOf(const char (&field)[65]) { return std::string(field, strnlen(field, 65)); }
-
-bool ValidId(const std::string& id) {
-  try {
-    ValidateClientId(id);
-    return true;
-  } catch (const InputError&) {
-    return false;
-  }
-}
 
 }  // namespace
 
@@ -168,8 +147,8 @@ void ServerLoop::CloseSession(std::map<std::string, Client>::iterator it) {
 void ServerLoop::ProcessSessionControls() {
   hapco_idl_SessionControl control{};
   while (session_reader_.Take(&control)) {
-    const std::string id = IdOf(control.client_id);
-    if (!ValidId(id)) {
+    const std::string id = ClientIdOf(control.client_id);
+    if (!IsValidClientId(id)) {
       ++counters_.invalid_client_ids;
       ++counters_.input.unknown_clients;
       Log(kLogClient, "session control with an invalid client id ignored");
@@ -242,8 +221,8 @@ void ServerLoop::ProcessPoses() {
   // Take everything available; keep the newest valid pose per client.
   while (pose_reader_.Take(&pose)) {
     const int64_t receive_ns = MonotonicNowNs();
-    const std::string id = IdOf(pose.client_id);
-    if (!ValidId(id)) {
+    const std::string id = ClientIdOf(pose.client_id);
+    if (!IsValidClientId(id)) {
       ++counters_.invalid_client_ids;
       ++counters_.input.unknown_clients;
       Log(kLogClient, "pose with an invalid client id ignored");
@@ -256,7 +235,7 @@ void ServerLoop::ProcessPoses() {
         ++counters_.poses_after_leave;
         continue;  // in flight when the client left; not bad input
       }
-      const PoseVerdict first = CheckStateless(pose, options_.limits);
+      const PoseVerdict first = CheckStatelessPose(pose, options_.limits);
       if (first != PoseVerdict::kAccept) {
         Count(first, id);
         continue;

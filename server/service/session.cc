@@ -50,33 +50,12 @@ Session::Session(std::string client_id, const sim::TwoBodyModel& model,
 
 PoseVerdict Session::Check(const hapco_idl_DevicePose& pose, int64_t receive_ns,
                            const PoseLimits& limits) {
-  if (flood_tokens_ < 0) {
-    flood_tokens_ = limits.flood_burst;
-  } else {
-    const double elapsed_ms = static_cast<double>(receive_ns - flood_last_ns_) * 1e-6;
-    flood_tokens_ = std::min(limits.flood_burst, flood_tokens_ + elapsed_ms * limits.max_poses_per_ms);
-  }
-  flood_last_ns_ = receive_ns;
-  if (flood_tokens_ < 1.0) return PoseVerdict::kFlood;
-  flood_tokens_ -= 1.0;
-  const Eigen::Vector3d p(pose.position_m.x, pose.position_m.y, pose.position_m.z);
-  const auto& q = pose.orientation;
-  if (!std::isfinite(q.w) || !std::isfinite(q.x) || !std::isfinite(q.y) || !std::isfinite(q.z)) {
-    return PoseVerdict::kNonFinite;
-  }
-  std::optional<sim::AcceptedPose> last;
-  if (have_pose_) last = sim::AcceptedPose{last_sequence_, last_position_m_};
-  return sim::CheckPose(p, pose.sequence_number, last, limits);
+  return stream_.Check(pose, receive_ns, limits);
 }
 
 int64_t Session::StepAndPublish(const hapco_idl_DevicePose& pose, int64_t receive_ns) {
   const Eigen::Vector3d p(pose.position_m.x, pose.position_m.y, pose.position_m.z);
-  if (have_pose_ && pose.sequence_number > last_sequence_ + 1) {
-    counters_.sequence_gaps += pose.sequence_number - last_sequence_ - 1;
-  }
-  have_pose_ = true;
-  last_sequence_ = pose.sequence_number;
-  last_position_m_ = p;
+  counters_.sequence_gaps += stream_.Accept(pose);
   static const sim::StepOutput kNoPhysics{};  // zero force, no contact, step 0
   const sim::StepOutput& out = physics_ == SessionPhysics::kContact ? sim_.Step(p) : kNoPhysics;
   ++counters_.steps;
@@ -149,7 +128,7 @@ void Session::FillContactFrame(uint64_t pose_sequence) {
 
 void Session::Reset() {
   sim_.Reset();
-  have_pose_ = false;
+  stream_.Reset();
   last_good_force_n_.setZero();
 }
 

@@ -13,6 +13,7 @@
 #include "service/dds.h"
 #include "sim/step_pipeline.h"
 #include "sim/pose_limits.h"
+#include "service/pose_intake.h"
 #include "sim/two_body_model.h"
 
 namespace hapco::service {
@@ -65,7 +66,7 @@ class Session {
   const SessionCounters& counters() const { return counters_; }
   const sim::StepOutput& last_output() const { return sim_.last_output(); }
   const sim::TwoBodyModel& model() const { return sim_.model(); }  // this session's scene
-  uint64_t last_sequence() const { return last_sequence_; }
+  uint64_t last_sequence() const { return stream_.last() ? stream_.last()->sequence : 0; }
   const Eigen::Vector3d& last_force_n() const { return last_good_force_n_; }  // last sent, N
 
  private:
@@ -79,12 +80,8 @@ class Session {
   Writer<hapco_idl_ContactStateFrame> contact_writer_;
   SamplePtr<hapco_idl_ContactStateFrame> frame_;  // reserved once, reused every step
   hapco_idl_FeedbackForce force_{};
-  bool have_pose_ = false;
-  uint64_t last_sequence_ = 0;
-  Eigen::Vector3d last_position_m_ = Eigen::Vector3d::Zero();
+  PoseStream stream_;  // flood bucket, order and jump checks (the fuzzed code, pose_intake.h)
   Eigen::Vector3d last_good_force_n_ = Eigen::Vector3d::Zero();
-  double flood_tokens_ = -1;  // < 0: not started
-  int64_t flood_last_ns_ = 0;
   SessionCounters counters_;
 };
 
