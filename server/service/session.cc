@@ -1,8 +1,6 @@
 #include "service/session.h"
 
 #include <algorithm>
-#include <cmath>
-#include <optional>
 #include <ctime>
 
 #include "common/realtime.h"
