@@ -16,8 +16,17 @@ only the CONTENT of W (fclib_matrix fields nzmax, m, n, p, i, x, nz):
   - compressed columns (nz = -1), which is what HapCo writes.
 Siconos also stores the number of degrees of freedom as an int attribute of /fclib_local/info.
 
-Every problem is the same hand-written 3-contact problem (W 9x9, q, mu below), copied by
+Every local problem is the same hand-written 3-contact problem (W 9x9, q, mu below), copied by
 hand into tests/unit/fclib/fclib_io_test.cc. The bad_*.hdf5 files each break one rule.
+roundoff_asymmetric_csr.hdf5 stores that W with a few mirrored entries differing by ~1e-6 of
+max|W| (what writers computing W with iterative solves leave; compressed rows).
+
+Global problems (/fclib_global: M v = H r + f, u = H^T v + w) use the hand-written 5-dof,
+2-contact problem GM, GH, GF, GW, GMU below (copied by hand into the tests), in three layouts:
+Siconos' triplets (rows in i, columns in p, nzmax = nz: globalFrictionContact_fclib_write),
+fclib.h's documented triplets (rows in p) and compressed columns. H is 5 x 6 with an entry in
+column 5, so only one triplet reading fits each file. bad_global_with_g.hdf5 adds an equality
+constraint (G, b); bad_global.hdf5 (the name is historical) is a valid 3-dof, 1-contact problem.
 """
 import os
 import sys
@@ -38,6 +47,26 @@ W[6:9, 3:6] = W[3:6, 6:9].T
 Q = np.array([-1.0, 0.5, -0.25, -0.5, 0.1, 0.0, 0.75, 0.0, 0.0])
 MU = np.array([0.3, 0.5, 0.8])
 assert np.array_equal(W, W.T)
+
+# Round-off asymmetry: mirrored entries off by up to 3e-6 (max|W| = 3: relative 1e-6).
+W_ROUNDOFF = W.copy()
+W_ROUNDOFF[5, 3] = 0.2 + 3e-6
+W_ROUNDOFF[6, 3] = 0.25 - 1e-6
+W_ROUNDOFF[1, 0] = 0.1 + 2e-7
+
+# The known global problem: M symmetric positive definite (diagonally dominant), H 5 x 6.
+GM = np.array([[4.0, 1.0, 0.0, 0.0, 0.0],
+               [1.0, 3.0, 0.0, 0.0, 0.0],
+               [0.0, 0.0, 2.0, 0.0, 0.0],
+               [0.0, 0.0, 0.0, 5.0, 0.5],
+               [0.0, 0.0, 0.0, 0.5, 2.5]])
+GH = np.zeros((5, 6))
+GH[0, 0] = 1.0; GH[1, 1] = 1.0; GH[2, 2] = 1.0          # contact 0 on dofs 0..2
+GH[3, 3] = 1.0; GH[4, 4] = 0.8; GH[2, 5] = -0.6; GH[4, 3] = 0.25  # contact 1 on dofs 2..4
+GF = np.array([-1.0, 0.5, -0.5, -2.0, 0.25])
+GW = np.array([0.1, 0.0, 0.0, -0.05, 0.0, 0.0])
+GMU = np.array([0.4, 0.7])
+assert np.array_equal(GM, GM.T) and np.all(np.linalg.eigvalsh(GM) > 0)
 
 
 def int1(group, name, value):
@@ -172,6 +201,47 @@ def short_x_csc(g):
     write_matrix(g, 9, 9, -1, len(x), p, i, x[:-3])  # x shorter than nzmax
 
 
+def triplets_of(a):
+    rows, cols = np.nonzero(a.T)
+    rows, cols = cols, rows  # column-major order, as CSparse compresses
+    return [(int(r), int(c), float(a[r, c])) for r, c in zip(rows, cols)]
+
+
+def global_file(path, layout, with_g=False):
+    """layout: 'siconos' (triplet rows in i), 'documented' (triplet rows in p) or 'csc'."""
+    def matrix(group, a):
+        m, n = a.shape
+        if layout == "csc":
+            p, i, x = csc(a)
+            write_matrix(group, m, n, -1, len(x), p, i, x)
+            return
+        e = triplets_of(a)
+        rows, cols, vals = [r for r, _, _ in e], [c for _, c, _ in e], [v for _, _, v in e]
+        if layout == "siconos":
+            write_matrix(group, m, n, len(e), len(e), cols, rows, vals)
+        else:
+            write_matrix(group, m, n, len(e), len(e), rows, cols, vals)
+    with h5py.File(path, "w") as f:
+        top = f.create_group("fclib_global")
+        int1(top, "spacedim", 3)
+        matrix(top.create_group("M"), GM)
+        matrix(top.create_group("H"), GH)
+        vec = top.create_group("vectors")
+        doubles(vec, "f", GF)
+        doubles(vec, "w", GW)
+        doubles(vec, "mu", GMU)
+        if with_g:
+            matrix(top.create_group("G"), np.array([[1.0], [0.0], [0.0], [0.0], [-1.0]]))
+            doubles(vec, "b", [0.0])
+        g = top.create_group("info")
+        fixed_string(g, "title", "HapCo 5-dof 2-contact global test problem (%s layout)" % layout)
+
+
+def roundoff_csr(g):
+    p, i, x = csr(W_ROUNDOFF, block_mask())
+    write_matrix(g, 9, 9, -2, len(x), p, i, x)
+
+
 def main():
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     out = os.path.join(root, "tests", "data", "fclib")
@@ -193,6 +263,13 @@ def main():
         doubles(s, "u", [0.5 * k for k in range(9)])
         doubles(s, "r", [1.0 + k for k in range(9)])
 
+    local_file(path("roundoff_asymmetric_csr.hdf5"), roundoff_csr,
+               info={"title": "W symmetric up to round-off (1e-6 relative)"})
+    global_file(path("siconos_global_triplet.hdf5"), "siconos")
+    global_file(path("documented_global_triplet.hdf5"), "documented")
+    global_file(path("csc_global.hdf5"), "csc")
+    global_file(path("bad_global_with_g.hdf5"), "siconos", with_g=True)
+
     # One broken rule per file.
     local_file(path("bad_upper_triangle_triplet.hdf5"), upper_triangle_triplet)
     local_file(path("bad_spacedim2.hdf5"), csc_writer, spacedim=2)
@@ -208,7 +285,7 @@ def main():
             g = f["fclib_local"].create_group(name)
             write_matrix(g, 9 if name == "V" else 1, 1, -1, 1, [0, 1], [0], [1.0])
         doubles(f["fclib_local/vectors"], "s", [0.0])
-    with h5py.File(path("bad_global.hdf5"), "w") as f:  # a global problem (M, H, f, w, mu)
+    with h5py.File(path("bad_global.hdf5"), "w") as f:  # a valid minimal global problem (historical name)
         top = f.create_group("fclib_global")
         int1(top, "spacedim", 3)
         write_matrix(top.create_group("M"), 3, 3, -1, 3, [0, 1, 2, 3], [0, 1, 2], [1.0] * 3)

@@ -286,8 +286,8 @@ struct LocalLayout {
 LocalLayout CheckLocalLayout(hid_t file, const std::string& path) {
   if (!Exists(file, "/fclib_local")) {
     if (Exists(file, "/fclib_global")) {
-      Fail(path, "holds a global problem (/fclib_global: M, H, G, f, w); HapCo reads local "
-                 "problems (/fclib_local: W, q, mu) only");
+      Fail(path, "holds a global problem (/fclib_global: M, H, f, w, mu), not a local one "
+                 "(/fclib_local: W, q, mu); read it with ReadFclibGlobalProblem");
     }
     Fail(path, "is an HDF5 file but not an FCLIB local problem (no /fclib_local group)");
   }
@@ -525,9 +525,195 @@ class LocalView {
   fclib_local local_{};
 };
 
+// --- Global problems: the same checks, for /fclib_global ---
+
+struct MatrixLayout {
+  int m = 0, n = 0, nz = 0, nzmax = 0;
+  long x_points = 0;
+};
+
+// The datasets fclib's read_matrix reads from `group` (nzmax, m, n, nz, p, i, x and the
+// optional conditioning/determinant/rank/comment), checked with the sizes its buffers get.
+MatrixLayout CheckMatrixGroup(hid_t file, const std::string& path, const std::string& group) {
+  RequireGroup(file, path, group);
+  MatrixLayout layout;
+  layout.nzmax = ReadInt(file, path, group + "/nzmax");
+  layout.m = ReadInt(file, path, group + "/m");
+  layout.n = ReadInt(file, path, group + "/n");
+  layout.nz = ReadInt(file, path, group + "/nz");
+  const int m = layout.m, n = layout.n, nz = layout.nz, nzmax = layout.nzmax;
+  std::ostringstream msg;
+  if (m <= 0 || n <= 0) {
+    msg << group << " is " << m << "x" << n << "; both sizes must be positive";
+    Fail(path, msg.str());
+  }
+  if (nz < -2) {
+    Fail(path, group + "/nz is " + std::to_string(nz) +
+                   "; expected -1 (compressed columns), -2 (compressed rows) or >= 0 (triplet)");
+  }
+  if (nzmax < 0) Fail(path, group + "/nzmax is negative");
+  if (nz > nzmax) {
+    Fail(path, group + "/nz = " + std::to_string(nz) + " exceeds nzmax = " + std::to_string(nzmax));
+  }
+  const long mn = static_cast<long>(m) * n;
+  if (nzmax > mn) {
+    msg << group << " declares nzmax = " << nzmax << " for a " << m << "x" << n << " matrix (at most " << mn
+        << " entries)";
+    Fail(path, msg.str());
+  }
+  const long p_expected = nz >= 0 ? nz : (nz == -1 ? static_cast<long>(n) + 1 : static_cast<long>(m) + 1);
+  const long i_expected = nz >= 0 ? nz : nzmax;
+  RequireIntegers(file, path, group + "/p", p_expected, p_expected);
+  RequireIntegers(file, path, group + "/i", i_expected, i_expected);
+  const long used = nz >= 0 ? nz : nzmax;
+  if (used == 0) Fail(path, group + " stores no entries");
+  layout.x_points = RequireNumbers(file, path, group + "/x", used, nzmax).points;
+  if (ListedInGroup(file, path, group, "conditioning")) {
+    RequireNumbers(file, path, group + "/conditioning", 1);
+    RequireNumbers(file, path, group + "/determinant", 1);
+    RequireIntegers(file, path, group + "/rank", 1, 1);
+    if (ListedInGroup(file, path, group, "comment")) RequireOptionalString(file, path, group, "comment");
+  }
+  return layout;
+}
+
+struct GlobalLayout {
+  MatrixLayout m, h;
+  std::size_t title_size = 0, description_size = 0, math_info_size = 0;
+  int dofs() const { return m.n; }
+  int local_size() const { return h.n; }
+};
+
+GlobalLayout CheckGlobalLayout(hid_t file, const std::string& path) {
+  if (!Exists(file, "/fclib_global")) {
+    if (Exists(file, "/fclib_local")) {
+      Fail(path, "holds a local problem (/fclib_local: W, q, mu), not a global one; read it with "
+                 "ReadFclibLocalProblem");
+    }
+    Fail(path, "is an HDF5 file but not an FCLIB global problem (no /fclib_global group)");
+  }
+  RequireGroup(file, path, "/fclib_global");
+  const int spacedim = ReadInt(file, path, "/fclib_global/spacedim");
+  if (spacedim != 3) {
+    Fail(path, "spacedim is " + std::to_string(spacedim) + "; HapCo solves 3D contact problems (spacedim 3) only");
+  }
+  if (Exists(file, "/fclib_global/G") || Exists(file, "/fclib_global/vectors/b")) {
+    Fail(path, "has equality constraints (/fclib_global/G and b: G^T v + b = 0 with multipliers lambda); "
+               "HapCo solves global problems without them (M v = H r + f, u = H^T v + w)");
+  }
+  GlobalLayout layout;
+  layout.m = CheckMatrixGroup(file, path, "/fclib_global/M");
+  if (layout.m.m != layout.m.n) {
+    Fail(path, "M is " + std::to_string(layout.m.m) + "x" + std::to_string(layout.m.n) + "; it must be square");
+  }
+  layout.h = CheckMatrixGroup(file, path, "/fclib_global/H");
+  std::ostringstream msg;
+  if (layout.h.m != layout.m.n) {
+    msg << "H has " << layout.h.m << " rows but M has " << layout.m.n << " (H is dofs x 3 contacts)";
+    Fail(path, msg.str());
+  }
+  if (layout.h.n % 3 != 0) {
+    Fail(path, "H has " + std::to_string(layout.h.n) + " columns, not a multiple of 3 (spacedim 3)");
+  }
+  if (layout.h.n / 3 > kMaxContacts) {
+    msg << "has " << layout.h.n / 3 << " contacts; at most " << kMaxContacts
+        << " are supported (the Delassus operator W is formed dense)";
+    Fail(path, msg.str());
+  }
+  RequireGroup(file, path, "/fclib_global/vectors");
+  RequireNumbers(file, path, "/fclib_global/vectors/f", layout.m.m);
+  RequireNumbers(file, path, "/fclib_global/vectors/w", layout.h.n);
+  RequireNumbers(file, path, "/fclib_global/vectors/mu", layout.h.n / 3);
+  if (Exists(file, "/fclib_global/info")) {
+    RequireGroup(file, path, "/fclib_global/info");
+    layout.title_size = RequireOptionalString(file, path, "/fclib_global/info", "title");
+    layout.description_size = RequireOptionalString(file, path, "/fclib_global/info", "description");
+    layout.math_info_size = RequireOptionalString(file, path, "/fclib_global/info", "math_info");
+  }
+  return layout;
+}
+
+GlobalLayout CheckGlobalFileInProcess(const std::string& path, bool* has_solution) {
+  SilenceHdf5();
+  CheckIsHdf5File(path);
+  H5Id file(H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT), H5Fclose);
+  if (!file.valid()) Fail(path, "cannot be opened by HDF5 (corrupt or locked?)");
+  GlobalLayout layout;
+  try {
+    layout = CheckGlobalLayout(file.get(), path);
+  } catch (const std::bad_alloc&) {
+    Fail(path, "declares datasets too large to read (corrupt file?)");
+  }
+  if (has_solution != nullptr) *has_solution = Exists(file.get(), "/solution");
+  return layout;
+}
+
+GlobalLayout CheckGlobalFile(const std::string& path, bool* has_solution = nullptr) {
+  ProbeInChildProcess(path, [&] { CheckGlobalFileInProcess(path, nullptr); });
+  return CheckGlobalFileInProcess(path, has_solution);
+}
+
+struct GlobalDeleter {
+  void operator()(fclib_global* problem) const {
+    fclib_delete_global(problem);  // frees the members, not the struct
+    std::free(problem);            // NOLINT: allocated by libfclib with calloc
+  }
+};
+using GlobalPtr = std::unique_ptr<fclib_global, GlobalDeleter>;
+
+MatrixStorage StorageOf(const fclib_matrix& matrix) {
+  return matrix.nz >= 0 ? MatrixStorage::kTriplet
+         : matrix.nz == -1 ? MatrixStorage::kCompressedColumns
+                           : MatrixStorage::kCompressedRows;
+}
+
+int StoredEntries(const fclib_matrix& matrix) {
+  return matrix.nz >= 0 ? matrix.nz : matrix.p[matrix.nz == -1 ? matrix.n : matrix.m];
+}
+
+// Compressed columns of a sparse matrix, as int arrays for an fclib_matrix view.
+struct CompressedColumns {
+  std::vector<int> p, i;
+  std::vector<double> x;
+  fclib_matrix view{};
+  explicit CompressedColumns(const Eigen::SparseMatrix<double>& a) {
+    p.push_back(0);
+    for (int j = 0; j < a.outerSize(); ++j) {
+      for (Eigen::SparseMatrix<double>::InnerIterator it(a, j); it; ++it) {
+        i.push_back(static_cast<int>(it.row()));
+        x.push_back(it.value());
+      }
+      p.push_back(static_cast<int>(i.size()));
+    }
+    view.nzmax = static_cast<int>(x.size());
+    view.m = static_cast<int>(a.rows());
+    view.n = static_cast<int>(a.cols());
+    view.p = p.data();
+    view.i = i.data();
+    view.x = x.data();
+    view.nz = -1;
+    view.info = nullptr;
+  }
+};
+
+// contact::ValidateProblem, except that W may be asymmetric within kMaxRelativeAsymmetry (a
+// problem as a file stored it): then its symmetric part is validated.
+void ValidateStoredProblem(const contact::ContactProblem& problem) {
+  const Eigen::MatrixXd& w = problem.flexibility_m_per_n;
+  const bool square = w.rows() == w.cols() && w.size() > 0;
+  const double asymmetry = square && w.allFinite() ? RelativeAsymmetry(w) : 0.0;
+  if (asymmetry > 0.0 && asymmetry <= kMaxRelativeAsymmetry) {
+    contact::ContactProblem symmetric = problem;
+    symmetric.flexibility_m_per_n = 0.5 * (w + w.transpose());
+    contact::ValidateProblem(symmetric);
+  } else {
+    contact::ValidateProblem(problem);
+  }
+}
+
 void ValidateForWrite(const std::string& path, const contact::ContactProblem& problem) {
   try {
-    contact::ValidateProblem(problem);
+    ValidateStoredProblem(problem);
   } catch (const InputError& error) {
     Fail(path, std::string("cannot write: ") + error.what());
   }
@@ -553,11 +739,15 @@ const char* StorageName(MatrixStorage storage) {
 
 namespace detail {
 
-Eigen::MatrixXd ToDense(const fclib_matrix& matrix, TripletRows triplet_rows,
-                        long available_values, const std::string& where) {
+namespace {
+
+// Calls add(row, column, value) for every stored entry of `matrix` (duplicates included),
+// after checking pointers, index ranges and values (ToDense's contract, fclib_matrix.h).
+template <typename Add>
+void VisitEntries(const fclib_matrix& matrix, TripletRows triplet_rows, long available_values,
+                  const std::string& where, const Add& add_entry) {
   const int rows = matrix.m, cols = matrix.n;
   if (rows < 0 || cols < 0) throw InputError(where + ": negative size");
-  Eigen::MatrixXd dense = Eigen::MatrixXd::Zero(rows, cols);
   auto add = [&](long k, long r, long c) {
     std::ostringstream msg;
     if (r < 0 || r >= rows || c < 0 || c >= cols) {
@@ -570,7 +760,7 @@ Eigen::MatrixXd ToDense(const fclib_matrix& matrix, TripletRows triplet_rows,
           << "; every value must be finite";
       throw InputError(msg.str());
     }
-    dense(r, c) += matrix.x[k];
+    add_entry(static_cast<int>(r), static_cast<int>(c), matrix.x[k]);
   };
   if (matrix.nz >= 0) {  // triplet
     if (matrix.nz > available_values) {
@@ -579,7 +769,7 @@ Eigen::MatrixXd ToDense(const fclib_matrix& matrix, TripletRows triplet_rows,
     const int* row_index = triplet_rows == TripletRows::kInI ? matrix.i : matrix.p;
     const int* col_index = triplet_rows == TripletRows::kInI ? matrix.p : matrix.i;
     for (long k = 0; k < matrix.nz; ++k) add(k, row_index[k], col_index[k]);
-    return dense;
+    return;
   }
   if (matrix.nz != -1 && matrix.nz != -2) {
     throw InputError(where + ": unknown storage nz = " + std::to_string(matrix.nz));
@@ -607,7 +797,26 @@ Eigen::MatrixXd ToDense(const fclib_matrix& matrix, TripletRows triplet_rows,
       }
     }
   }
+}
+
+}  // namespace
+
+Eigen::MatrixXd ToDense(const fclib_matrix& matrix, TripletRows triplet_rows, long available_values,
+                        const std::string& where) {
+  Eigen::MatrixXd dense = Eigen::MatrixXd::Zero(std::max(matrix.m, 0), std::max(matrix.n, 0));
+  VisitEntries(matrix, triplet_rows, available_values, where,
+               [&](int r, int c, double x) { dense(r, c) += x; });
   return dense;
+}
+
+Eigen::SparseMatrix<double> ToSparse(const fclib_matrix& matrix, TripletRows triplet_rows,
+                                     long available_values, const std::string& where) {
+  std::vector<Eigen::Triplet<double>> entries;
+  VisitEntries(matrix, triplet_rows, available_values, where,
+               [&](int r, int c, double x) { entries.emplace_back(r, c, x); });
+  Eigen::SparseMatrix<double> sparse(matrix.m, matrix.n);
+  sparse.setFromTriplets(entries.begin(), entries.end());  // duplicates summed (CSparse)
+  return sparse;
 }
 
 }  // namespace detail
@@ -636,27 +845,34 @@ contact::ContactProblem ReadFclibLocalProblem(const std::string& path,
   problem.friction_coefficient = CopyChecked(local->mu, n / 3, path, "/fclib_local/vectors/mu");
 
   // Asymmetry gets its own message: it is the symptom a triplet-convention mix-up would be
-  // suspected of, and it is not one (see fclib_io.h).
+  // suspected of, and it is not one (see fclib_io.h). Round-off asymmetry is accepted.
   const Eigen::MatrixXd& dense = problem.flexibility_m_per_n;
-  const double scale = dense.cwiseAbs().maxCoeff();
-  for (int j = 0; j < n; ++j) {
-    for (int i = j + 1; i < n; ++i) {
-      if (std::abs(dense(i, j) - dense(j, i)) > 1e-8 * scale) {
-        std::ostringstream msg;
-        msg << "W is not symmetric: W(" << i << "," << j << ") = " << dense(i, j) << " but W("
-            << j << "," << i << ") = " << dense(j, i) << " (stored as "
-            << StorageName(w.nz >= 0   ? MatrixStorage::kTriplet
-                           : w.nz == -1 ? MatrixStorage::kCompressedColumns
-                                        : MatrixStorage::kCompressedRows)
-            << "). FCLIB stores the full symmetric W; a file holding one triangle only is not "
-               "supported";
-        if (w.nz >= 0) {
-          msg << " (reading the triplet's p/i the other way round only transposes W, so the "
-                 "index convention is not the cause)";
-        }
-        Fail(path, msg.str());
-      }
+  const double asymmetry = RelativeAsymmetry(dense);
+  if (asymmetry > kMaxRelativeAsymmetry) {
+    Eigen::Index worst_i = 0, worst_j = 0;
+    (dense - dense.transpose()).cwiseAbs().maxCoeff(&worst_i, &worst_j);
+    if (worst_i < worst_j) std::swap(worst_i, worst_j);
+    std::ostringstream msg;
+    msg << "W is not symmetric: W(" << worst_i << "," << worst_j << ") = " << dense(worst_i, worst_j)
+        << " but W(" << worst_j << "," << worst_i << ") = " << dense(worst_j, worst_i)
+        << " (stored as "
+        << StorageName(w.nz >= 0   ? MatrixStorage::kTriplet
+                       : w.nz == -1 ? MatrixStorage::kCompressedColumns
+                                    : MatrixStorage::kCompressedRows)
+        << "; max|W - W^T| / max|W| = " << asymmetry << ", round-off is accepted up to "
+        << kMaxRelativeAsymmetry
+        << "). FCLIB stores the full symmetric W; a file holding one triangle only is not "
+           "supported";
+    if (w.nz >= 0) {
+      msg << " (reading the triplet's p/i the other way round only transposes W, so the "
+             "index convention is not the cause)";
     }
+    Fail(path, msg.str());
+  }
+  contact::ContactProblem stored;
+  if (asymmetry > 0.0) {
+    stored = problem;
+    problem.flexibility_m_per_n = 0.5 * (stored.flexibility_m_per_n + stored.flexibility_m_per_n.transpose());
   }
   try {
     contact::ValidateProblem(problem);
@@ -668,6 +884,8 @@ contact::ContactProblem ReadFclibLocalProblem(const std::string& path,
                          : w.nz == -1 ? MatrixStorage::kCompressedColumns
                                       : MatrixStorage::kCompressedRows;
     details->w_stored_entries = w.nz >= 0 ? w.nz : w.p[w.nz == -1 ? w.n : w.m];
+    details->w_relative_asymmetry = asymmetry;
+    details->stored_problem = std::move(stored);
     details->info = FclibInfo{};
     if (local->info != nullptr) {
       details->info.title = CopyString(local->info->title, layout.title_size);
@@ -756,7 +974,7 @@ std::optional<FclibSolution> ReadFclibSolution(const std::string& path) {
 }
 
 double FclibMeritLocal(const contact::ContactProblem& problem, const Eigen::VectorXd& force_n) {
-  contact::ValidateProblem(problem);
+  ValidateStoredProblem(problem);
   if (force_n.size() != problem.free_displacement_m.size()) {
     throw InputError("FclibMeritLocal: r has size " + std::to_string(force_n.size()) +
                      ", the problem needs 3m = " +
@@ -773,6 +991,181 @@ double FclibMeritLocal(const contact::ContactProblem& problem, const Eigen::Vect
   solution.r = r.data();
   solution.l = nullptr;
   return fclib_merit_local(view.get(), MERIT_1, &solution);
+}
+
+double RelativeAsymmetry(const Eigen::MatrixXd& w) {
+  HAPCO_ASSERT(w.rows() == w.cols(), "RelativeAsymmetry needs a square matrix");
+  const double scale = w.cwiseAbs().maxCoeff();
+  if (!(scale > 0.0)) return 0.0;
+  return (w - w.transpose()).cwiseAbs().maxCoeff() / scale;
+}
+
+FclibKind ReadFclibKind(const std::string& path) {
+  auto kind_in_process = [&] {
+    SilenceHdf5();
+    CheckIsHdf5File(path);
+    H5Id file(H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT), H5Fclose);
+    if (!file.valid()) Fail(path, "cannot be opened by HDF5 (corrupt or locked?)");
+    if (Exists(file.get(), "/fclib_local")) return FclibKind::kLocal;
+    if (Exists(file.get(), "/fclib_global")) return FclibKind::kGlobal;
+    Fail(path, "is an HDF5 file but not an FCLIB problem (neither /fclib_local nor /fclib_global)");
+  };
+  ProbeInChildProcess(path, [&] { kind_in_process(); });
+  return kind_in_process();
+}
+
+contact::GlobalContactProblem ReadFclibGlobalProblem(const std::string& path, FclibGlobalDetails* details) {
+  const GlobalLayout layout = CheckGlobalFile(path);
+  GlobalPtr global(fclib_read_global(path.c_str()));
+  if (!global) Fail(path, "libfclib could not read the global problem");
+  HAPCO_ASSERT(global->M != nullptr && global->H != nullptr && global->G == nullptr &&
+                   global->M->n == layout.m.n && global->H->n == layout.h.n && global->H->nz == layout.h.nz &&
+                   global->spacedim == 3,
+               "libfclib read a different layout than the one checked");
+  contact::GlobalContactProblem problem;
+  TripletReading h_reading = TripletReading::kNotTriplet;
+  try {
+    // M is symmetric: the two triplet readings give the same matrix (see fclib_io.h).
+    problem.m = detail::ToSparse(*global->M, detail::TripletRows::kInI, layout.m.x_points, "M");
+    if (global->H->nz < 0) {
+      problem.h = detail::ToSparse(*global->H, detail::TripletRows::kInI, layout.h.x_points, "H");
+    } else {
+      // H is n x 3n_c: read rows from `i` (CSparse, Siconos); if those indices do not fit but
+      // the documented reading (rows in `p`) does, the file follows fclib.h.
+      try {
+        problem.h = detail::ToSparse(*global->H, detail::TripletRows::kInI, layout.h.x_points, "H");
+        h_reading = TripletReading::kRowsInI;
+      } catch (const InputError& csparse_error) {
+        try {
+          problem.h = detail::ToSparse(*global->H, detail::TripletRows::kInP, layout.h.x_points, "H");
+          h_reading = TripletReading::kRowsInP;
+        } catch (const InputError&) {
+          throw csparse_error;
+        }
+      }
+    }
+  } catch (const InputError& error) {
+    RethrowWithPath(path, error);
+  }
+  problem.f = CopyChecked(global->f, layout.m.m, path, "/fclib_global/vectors/f");
+  problem.w = CopyChecked(global->w, layout.h.n, path, "/fclib_global/vectors/w");
+  problem.mu = CopyChecked(global->mu, layout.h.n / 3, path, "/fclib_global/vectors/mu");
+  try {
+    contact::ValidateGlobalProblem(problem);
+  } catch (const InputError& error) {
+    RethrowWithPath(path, error);
+  }
+  if (details != nullptr) {
+    details->m_storage = StorageOf(*global->M);
+    details->h_storage = StorageOf(*global->H);
+    details->h_triplet_reading = h_reading;
+    details->m_stored_entries = StoredEntries(*global->M);
+    details->h_stored_entries = StoredEntries(*global->H);
+    const Eigen::SparseMatrix<double> skew = problem.m - Eigen::SparseMatrix<double>(problem.m.transpose());
+    details->m_relative_asymmetry =
+        skew.nonZeros() > 0 ? skew.coeffs().cwiseAbs().maxCoeff() / problem.m.coeffs().cwiseAbs().maxCoeff() : 0.0;
+    details->info = FclibInfo{};
+    if (global->info != nullptr) {
+      details->info.title = CopyString(global->info->title, layout.title_size);
+      details->info.description = CopyString(global->info->description, layout.description_size);
+      details->info.math_info = CopyString(global->info->math_info, layout.math_info_size);
+    }
+  }
+  return problem;
+}
+
+void WriteFclibGlobalProblem(const std::string& path, const contact::GlobalContactProblem& problem,
+                             const FclibInfo& info) {
+  SilenceHdf5();
+  try {
+    contact::ValidateGlobalProblem(problem);
+  } catch (const InputError& error) {
+    Fail(path, std::string("cannot write: ") + error.what());
+  }
+  if (problem.num_contacts() > kMaxContacts) {
+    Fail(path, "cannot write more than " + std::to_string(kMaxContacts) + " contacts");
+  }
+  {
+    H5Id file(H5Fcreate(path.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT), H5Fclose);
+    if (!file.valid()) Fail(path, "cannot be created (does the directory exist and is it writable?)");
+  }
+  CompressedColumns m(problem.m), h(problem.h);
+  std::vector<double> f(problem.f.data(), problem.f.data() + problem.f.size());
+  std::vector<double> w(problem.w.data(), problem.w.data() + problem.w.size());
+  std::vector<double> mu(problem.mu.data(), problem.mu.data() + problem.mu.size());
+  std::string title = info.title, description = info.description, math_info = info.math_info;
+  fclib_info fclib_info_view{};
+  fclib_info_view.title = title.empty() ? nullptr : title.data();
+  fclib_info_view.description = description.empty() ? nullptr : description.data();
+  fclib_info_view.math_info = math_info.empty() ? nullptr : math_info.data();
+  fclib_global global{};
+  global.M = &m.view;
+  global.H = &h.view;
+  global.G = nullptr;
+  global.mu = mu.data();
+  global.f = f.data();
+  global.b = nullptr;
+  global.w = w.data();
+  global.spacedim = 3;
+  global.info = (title.empty() && description.empty() && math_info.empty()) ? nullptr : &fclib_info_view;
+  if (fclib_write_global(&global, path.c_str()) != 1) Fail(path, "libfclib failed to write the global problem");
+}
+
+void WriteFclibGlobalSolution(const std::string& path, const FclibGlobalSolution& solution) {
+  bool has_solution = false;
+  const GlobalLayout layout = CheckGlobalFile(path, &has_solution);
+  if (solution.velocity.size() != layout.dofs() || solution.force.size() != layout.local_size() ||
+      solution.local_velocity.size() != layout.local_size()) {
+    std::ostringstream msg;
+    msg << "cannot write a solution with v, r, u of sizes " << solution.velocity.size() << ", "
+        << solution.force.size() << ", " << solution.local_velocity.size() << " for a problem with n = "
+        << layout.dofs() << " and 3n_c = " << layout.local_size();
+    Fail(path, msg.str());
+  }
+  if (!solution.velocity.allFinite() || !solution.force.allFinite() || !solution.local_velocity.allFinite()) {
+    Fail(path, "cannot write a solution with non-finite values");
+  }
+  if (has_solution) {
+    H5Id file(H5Fopen(path.c_str(), H5F_ACC_RDWR, H5P_DEFAULT), H5Fclose);
+    if (!file.valid() || H5Ldelete(file.get(), "/solution", H5P_DEFAULT) < 0) {
+      Fail(path, "cannot replace the existing /solution (is the file writable?)");
+    }
+  }
+  std::vector<double> v(solution.velocity.data(), solution.velocity.data() + solution.velocity.size());
+  std::vector<double> r(solution.force.data(), solution.force.data() + solution.force.size());
+  std::vector<double> u(solution.local_velocity.data(),
+                        solution.local_velocity.data() + solution.local_velocity.size());
+  fclib_solution out{};
+  out.v = v.data();
+  out.u = u.data();
+  out.r = r.data();
+  out.l = nullptr;
+  if (fclib_write_solution(&out, path.c_str()) != 1) {
+    Fail(path, "libfclib failed to write the solution (is the file writable?)");
+  }
+}
+
+std::optional<FclibGlobalSolution> ReadFclibGlobalSolution(const std::string& path) {
+  bool has_solution = false;
+  const GlobalLayout layout = CheckGlobalFile(path, &has_solution);
+  if (!has_solution) return std::nullopt;
+  const auto check_solution = [&] {
+    SilenceHdf5();
+    H5Id file(H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT), H5Fclose);
+    RequireGroup(file.get(), path, "/solution");
+    RequireNumbers(file.get(), path, "/solution/v", layout.dofs());
+    RequireNumbers(file.get(), path, "/solution/r", layout.local_size());
+    RequireNumbers(file.get(), path, "/solution/u", layout.local_size());
+  };
+  ProbeInChildProcess(path, check_solution);
+  check_solution();
+  SolutionPtr solution(fclib_read_solution(path.c_str()));
+  if (!solution) Fail(path, "libfclib could not read the solution");
+  FclibGlobalSolution out;
+  out.velocity = CopyChecked(solution->v, layout.dofs(), path, "/solution/v");
+  out.force = CopyChecked(solution->r, layout.local_size(), path, "/solution/r");
+  out.local_velocity = CopyChecked(solution->u, layout.local_size(), path, "/solution/u");
+  return out;
 }
 
 }  // namespace hapco::fclib

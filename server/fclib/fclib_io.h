@@ -12,9 +12,12 @@
 //    each other, so they give the same matrix exactly when the stored W is symmetric, which
 //    a flexibility must be. We read rows from i (CSparse) and reject an asymmetric result:
 //    the convention can neither cause nor repair an asymmetry (e.g. one stored triangle).
-//  - duplicate entries are summed (CSparse semantics).
-// Not supported (InputError): global problems (/fclib_global), mixed problems with V, R, s,
-// spacedim != 3, W not 3m × 3m, more than kMaxContacts contacts (W is dense here).
+//  - duplicate entries are summed (CSparse semantics);
+//  - W symmetric only up to round-off (assembled in floating point, or from iterative solves):
+//    accepted up to kMaxRelativeAsymmetry, the problem gets the symmetric part (W + Wᵀ)/2 and
+//    FclibFileDetails keeps the W as stored (see there).
+// Not supported (InputError): mixed problems with V, R, s, spacedim != 3, W not 3m × 3m, more
+// than kMaxContacts contacts (W is dense here). Global problems: fclib_global.h.
 //
 // Every failure throws hapco::InputError naming the file and what is wrong. The file is
 // checked with HDF5 before libfclib sees it, because libfclib calls exit(1) on a malformed
@@ -24,6 +27,7 @@
 #include <optional>
 #include <string>
 
+#include "contact/global_problem.h"
 #include "contact/problem.h"
 
 namespace hapco::fclib {
@@ -31,6 +35,17 @@ namespace hapco::fclib {
 // Largest problem read (W is stored dense: 3m × 3m doubles, 1.2 GB at this size).
 inline constexpr int kMaxContacts = 4000;
 
+// Largest accepted max|W − Wᵀ| / max|W| of a stored W. Why 1e-4: a W assembled with direct
+// solves is symmetric to ~1e-16·cond(K) (1e-12 at most on our meshes); writers that compute W
+// with iterative solves leave an asymmetry of the order of their solve tolerance (1e-8..1e-5;
+// a file seen in the wild differs by ~1e-6 relative: W(7,6) = -0.160679, W(6,7) = -0.16068).
+// Every structural fault instead — one triangle stored, a transposed or mis-signed block, a
+// lost entry — makes some entry differ from its mirror by O(1) of itself, i.e. far above 1e-4
+// of max|W| for any entry that matters. Solving with the symmetric part changes u = W r + q by
+// the skew part times r, at most 1e-4·max|W|·‖r‖₁; hapco-solve removes that residual by
+// refining the solution on the stored W (the solvers do not need W symmetric: they update u
+// by columns), so the answer is judged on the file's own W.
+inline constexpr double kMaxRelativeAsymmetry = 1e-4;
 // Free text stored in /fclib_local/info (all optional; empty = not written / not present).
 struct FclibInfo {
   std::string title;
@@ -47,15 +62,22 @@ struct FclibFileDetails {
   FclibInfo info;
   MatrixStorage w_storage = MatrixStorage::kCompressedColumns;
   int w_stored_entries = 0;  // entries stored for W (nz for triplets, p[n] or p[m] otherwise)
+  // max|W − Wᵀ| / max|W| of the stored W (0 for a bit-symmetric one), dimensionless.
+  double w_relative_asymmetry = 0.0;
+  // The problem as stored when W is not bit-symmetric (its W is the file's, q and μ the same);
+  // empty (0 contacts) otherwise. Not validated by contact::ValidateProblem (asymmetric W).
+  contact::ContactProblem stored_problem;
 };
 
-// Reads /fclib_local of an FCLIB file. The result passed contact::ValidateProblem.
+// Reads /fclib_local of an FCLIB file. The result passed contact::ValidateProblem; its W is the
+// symmetric part of the stored one (identical when the stored W is symmetric).
 contact::ContactProblem ReadFclibLocalProblem(const std::string& path,
                                               FclibFileDetails* details = nullptr);
 
 // Writes the problem as a new FCLIB file (an existing file is replaced), W in compressed
 // columns with its exact non-zero entries, values bit-exact (float64). Throws InputError if
-// the problem fails ValidateProblem or the file cannot be created.
+// the problem fails ValidateProblem (W may be asymmetric within kMaxRelativeAsymmetry: a copy
+// of a stored problem is written as it was) or the file cannot be created.
 void WriteFclibLocalProblem(const std::string& path, const contact::ContactProblem& problem,
                             const FclibInfo& info = {});
 
@@ -83,5 +105,50 @@ std::optional<FclibSolution> ReadFclibSolution(const std::string& path);
 // scale-free. It also silently treats a triplet-stored W as zero, so W is passed in
 // compressed columns here.)
 double FclibMeritLocal(const contact::ContactProblem& problem, const Eigen::VectorXd& force_n);
+
+// max|W − Wᵀ| / max|W| (0 for W = 0), dimensionless.
+double RelativeAsymmetry(const Eigen::MatrixXd& w);
+
+// --- Global problems (/fclib_global: M, H, f, w, mu; contact/global_problem.h) ---
+
+// Which problem an FCLIB file holds (checked like every read: a corrupt file is an InputError).
+enum class FclibKind { kLocal, kGlobal };
+FclibKind ReadFclibKind(const std::string& path);
+
+// How a triplet-stored H was read: its row indices in `i` (CSparse, as Siconos writes) or in
+// `p` (as fclib.h documents). H is n × 3n_c, rarely square: the reading whose indices fit is
+// taken, CSparse's when both fit (M is symmetric: both readings agree).
+enum class TripletReading { kNotTriplet, kRowsInI, kRowsInP };
+
+struct FclibGlobalDetails {
+  FclibInfo info;
+  MatrixStorage m_storage = MatrixStorage::kCompressedColumns;
+  MatrixStorage h_storage = MatrixStorage::kCompressedColumns;
+  TripletReading h_triplet_reading = TripletReading::kNotTriplet;
+  int m_stored_entries = 0, h_stored_entries = 0;
+  double m_relative_asymmetry = 0.0;  // max|M − Mᵀ| / max|M| as stored
+};
+
+// Reads /fclib_global of an FCLIB file; the result passed contact::ValidateGlobalProblem.
+// Refused with an InputError naming what to change: equality constraints (G, b: the mixed
+// problem GM3DFC with multipliers λ), spacedim != 3, more than kMaxContacts contacts, sizes
+// that do not match (M n×n, H n×3n_c, f n, w 3n_c, mu n_c), non-finite values.
+contact::GlobalContactProblem ReadFclibGlobalProblem(const std::string& path,
+                                                     FclibGlobalDetails* details = nullptr);
+
+// Writes a global problem as a new FCLIB file (replacing one), M and H in compressed columns.
+void WriteFclibGlobalProblem(const std::string& path, const contact::GlobalContactProblem& problem,
+                             const FclibInfo& info = {});
+
+// An FCLIB solution of a global problem: v (n), r and u (3n_c), u = Hᵀ v + w.
+struct FclibGlobalSolution {
+  Eigen::VectorXd velocity;      // v
+  Eigen::VectorXd force;         // r
+  Eigen::VectorXd local_velocity;  // u
+};
+// Adds /solution {v, u, r} to an FCLIB global-problem file (replacing one already there).
+void WriteFclibGlobalSolution(const std::string& path, const FclibGlobalSolution& solution);
+// The /solution of a global-problem file, std::nullopt when it has none.
+std::optional<FclibGlobalSolution> ReadFclibGlobalSolution(const std::string& path);
 
 }  // namespace hapco::fclib

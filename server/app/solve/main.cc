@@ -1,5 +1,6 @@
-// hapco-solve: solve a local friction-contact problem stored in an FCLIB file and report how
-// it went. Thin: the work is in hapco::fclib and hapco::contact (design.md, example 14).
+// hapco-solve: solve a local or global friction-contact problem stored in an FCLIB file and
+// report how it went. Thin: the work is in hapco::fclib, hapco::delassus and hapco::contact
+// (design.md, example 14).
 #include <algorithm>
 #include <array>
 #include <charconv>
@@ -12,8 +13,11 @@
 #include <system_error>
 
 #include "common/error.h"
+#include "common/memory.h"
+#include "contact/global_problem.h"
 #include "contact/projection.h"
 #include "contact/solver.h"
+#include "delassus/delassus.h"
 #include "fclib/fclib_io.h"
 
 namespace {
@@ -31,6 +35,15 @@ its status, outer/inner iterations, time, the fc3d error, the paper error, libfc
 and the number of contacts separating/sticking/sliding (r_n resp. the slip ||u_t|| compared
 with 100 * tol * max(||q||, ||r||, ||u||)).
 
+A W symmetric only up to round-off (max|W - W^T| / max|W| <= 1e-4, printed) is solved with
+its symmetric part, then refined on the stored W, and every error is reported on the stored W.
+
+A global problem (/fclib_global: M v = H r + f, u = H^T v + w, as fclib.h defines it; no
+equality constraints G, b) is reduced to the local one by the flexibility method: M factored
+once with CHOLMOD, W = H^T M^-1 H, q = H^T M^-1 f + w (time and memory printed); after the
+solve v = M^-1 (H r + f), and the global residual (momentum balance ||M v - H r - f|| and the
+cone complementarity of u = H^T v + w) is computed from M, H, f, w directly.
+
   --solver NAME     local-uzawa | global-uzawa-gs | global-uzawa-jacobi | reference
                     (default: reference, Gauss-Seidel with an exact local solve)
   --tol X           fc3d tolerance, dimensionless (default 1e-8): stop when
@@ -40,8 +53,9 @@ with 100 * tol * max(||q||, ||r||, ||u||)).
   --local-tol X     inner tolerance of local-uzawa, ||dr_alpha|| / rho < X, same units
                     (default 1e-8)
   --max-iter N      cap on outer iterations (sweeps), N >= 1 (default 1000)
-  --out FILE.hdf5   write a copy of the problem (W in compressed columns) with the solution
-                    r, u in its FCLIB /solution group (also when not converged)
+  --out FILE.hdf5   write a copy of the problem (matrices in compressed columns) with the
+                    solution in its FCLIB /solution group: r, u (and v for a global
+                    problem); also when not converged
   --help            this text
 
 If PROBLEM.hdf5 already holds a /solution, its fc3d error is printed too.
@@ -120,69 +134,179 @@ Options ParseOptions(int argc, char** argv) {
   return options;
 }
 
-int Run(const Options& options) {
-  namespace contact = hapco::contact;
-  namespace fclib = hapco::fclib;
-  fclib::FclibFileDetails details;
-  const contact::ContactProblem problem =
-      fclib::ReadFclibLocalProblem(options.problem_path, &details);
-  const std::optional<fclib::FclibSolution> stored =
-      fclib::ReadFclibSolution(options.problem_path);
-  const int m = problem.num_contacts();
+namespace contact = hapco::contact;
+namespace fclib = hapco::fclib;
 
-  std::printf("file          %s\n", options.problem_path.c_str());
-  if (!details.info.title.empty()) std::printf("title         %s\n", details.info.title.c_str());
-  std::printf("W             %d x %d, %s, %d stored entries\n", 3 * m, 3 * m,
-              fclib::StorageName(details.w_storage), details.w_stored_entries);
-  std::printf("contacts      %d, mu in [%g, %g]\n", m, problem.friction_coefficient.minCoeff(),
-              problem.friction_coefficient.maxCoeff());
-  if (stored) {
-    std::printf("stored solution fc3d error %.3e\n", contact::Fc3dError(problem, stored->force_n));
-  }
-
+contact::SolverParameters ParametersOf(const Options& options) {
   contact::SolverParameters params;
   params.fc3d_tolerance = options.fc3d_tolerance;
   // The paper's test is off unless asked for: a tolerance no residual can pass but zero.
   params.global_tolerance_m = options.paper_tolerance.value_or(std::numeric_limits<double>::min());
   params.local_tolerance_m = options.local_tolerance;
   params.max_iterations = options.max_iterations;
+  return params;
+}
+
+struct LocalSolve {
+  contact::SolverStatus status = contact::SolverStatus::kMaxIterations;
+  contact::SolverResult result;
+  int refine_iterations = -1;  // outer iterations of the refinement on the stored W (-1: none)
+};
+
+// Solves `problem`; when the file's W was only symmetric up to round-off (`stored` has
+// contacts), the solution of the symmetric part is refined on the stored W, warm-started, until
+// the tolerance holds there too: the solvers do not need W symmetric (they update u = W r + q
+// by columns), so the answer is a solution of the problem as written.
+LocalSolve SolveLocal(const Options& options, const contact::ContactProblem& problem,
+                      const contact::ContactProblem& stored) {
+  const contact::SolverParameters params = ParametersOf(options);
+  const int m = problem.num_contacts();
   contact::SolverWorkspace workspace;
   workspace.Reserve(m, params.max_iterations);
-  contact::SolverResult result;
-  result.Reserve(m, params.max_iterations);
-  const contact::SolverStatus status =
-      contact::Solve(options.solver, problem, params, &workspace, &result);
-  const contact::SolverStats& stats = result.stats;  // stats.state_counts: see below
+  LocalSolve out;
+  out.result.Reserve(m, params.max_iterations);
+  out.status = contact::Solve(options.solver, problem, params, &workspace, &out.result);
+  if (stored.num_contacts() > 0 && !(contact::Fc3dError(stored, out.result.force_n) < options.fc3d_tolerance)) {
+    contact::SolverParameters refine = params;
+    refine.warm_start = true;
+    const contact::SolverStats first = out.result.stats;
+    out.status = contact::Solve(options.solver, stored, refine, &workspace, &out.result);
+    out.refine_iterations = out.result.stats.iterations;
+    out.result.stats.iterations += first.iterations;
+    out.result.stats.inner_iterations += first.inner_iterations;
+    out.result.stats.seconds += first.seconds;
+  }
+  return out;
+}
 
+void PrintSolve(const Options& options, const contact::ContactProblem& judged, const LocalSolve& solve) {
+  const contact::SolverStats& stats = solve.result.stats;
   std::printf("solver        %s (fc3d tol %g, paper tol %s, max %d iterations)\n",
               std::string(contact::SolverName(options.solver)).c_str(), options.fc3d_tolerance,
               options.paper_tolerance ? std::to_string(*options.paper_tolerance).c_str() : "off",
               options.max_iterations);
-  std::printf("status        %s\n", std::string(contact::StatusName(status)).c_str());
-  std::printf("iterations    %d outer, %d inner\n", stats.iterations, stats.inner_iterations);
+  std::printf("status        %s\n", std::string(contact::StatusName(solve.status)).c_str());
+  if (solve.refine_iterations >= 0) {
+    std::printf("iterations    %d outer (%d of them refining on the stored W), %d inner\n", stats.iterations,
+                solve.refine_iterations, stats.inner_iterations);
+  } else {
+    std::printf("iterations    %d outer, %d inner\n", stats.iterations, stats.inner_iterations);
+  }
   std::printf("time          %.6f s\n", stats.seconds);
-  std::printf("fc3d error    %.3e\n", stats.fc3d_error);
-  std::printf("paper error   %.3e (units of W r, m for HapCo problems; rho %.4g)\n",
-              stats.paper_error_m, stats.rho);
-  std::printf("fclib merit   %.3e (libfclib MERIT_1)\n",
-              fclib::FclibMeritLocal(problem, result.force_n));
+  std::printf("fc3d error    %.3e\n", contact::Fc3dError(judged, solve.result.force_n));
+  std::printf("paper error   %.3e (units of W r, m for HapCo problems; rho %.4g)\n", stats.paper_error_m,
+              stats.rho);
+  std::printf("fclib merit   %.3e (libfclib MERIT_1)\n", fclib::FclibMeritLocal(judged, solve.result.force_n));
   // States from tolerances relative to the fc3d scale: the solver's own counts use the
   // paper tolerance, which is off here (projection.h ClassifyContact).
-  const double scale = std::max({problem.free_displacement_m.norm(), result.force_n.norm(),
-                                 result.displacement_m.norm()});
+  const Eigen::VectorXd u = judged.flexibility_m_per_n * solve.result.force_n + judged.free_displacement_m;
+  const double scale = std::max({judged.free_displacement_m.norm(), solve.result.force_n.norm(), u.norm()});
   const double state_tolerance = std::max(100.0 * options.fc3d_tolerance, 1e-12) * scale;
-  const std::array<int, 3> states = contact::CountContactStates(
-      result.force_n, result.displacement_m, state_tolerance, state_tolerance);
-  std::printf("states        separating %d, sticking %d, sliding %d (tolerance %.2e)\n",
-              states[0], states[1], states[2], state_tolerance);
+  const std::array<int, 3> states =
+      contact::CountContactStates(solve.result.force_n, u, state_tolerance, state_tolerance);
+  std::printf("states        separating %d, sticking %d, sliding %d (tolerance %.2e)\n", states[0], states[1],
+              states[2], state_tolerance);
+}
+
+int ExitCodeOf(contact::SolverStatus status) {
+  return status == contact::SolverStatus::kConverged ? kExitConverged : kExitNotConverged;
+}
+
+int RunLocal(const Options& options) {
+  fclib::FclibFileDetails details;
+  const contact::ContactProblem problem = fclib::ReadFclibLocalProblem(options.problem_path, &details);
+  const std::optional<fclib::FclibSolution> stored_solution = fclib::ReadFclibSolution(options.problem_path);
+  const int m = problem.num_contacts();
+  const bool asymmetric = details.stored_problem.num_contacts() > 0;
+  const contact::ContactProblem& judged = asymmetric ? details.stored_problem : problem;
+
+  std::printf("file          %s\n", options.problem_path.c_str());
+  if (!details.info.title.empty()) std::printf("title         %s\n", details.info.title.c_str());
+  std::printf("W             %d x %d, %s, %d stored entries\n", 3 * m, 3 * m,
+              fclib::StorageName(details.w_storage), details.w_stored_entries);
+  if (asymmetric) {
+    std::printf("W symmetry    max|W - W^T| / max|W| = %.2e (round-off, accepted up to %.0e): solved with "
+                "(W + W^T)/2, judged on the stored W\n",
+                details.w_relative_asymmetry, fclib::kMaxRelativeAsymmetry);
+  }
+  std::printf("contacts      %d, mu in [%g, %g]\n", m, problem.friction_coefficient.minCoeff(),
+              problem.friction_coefficient.maxCoeff());
+  if (stored_solution) {
+    std::printf("stored solution fc3d error %.3e\n", contact::Fc3dError(judged, stored_solution->force_n));
+  }
+  const LocalSolve solve = SolveLocal(options, problem, asymmetric ? details.stored_problem : contact::ContactProblem{});
+  PrintSolve(options, judged, solve);
   if (!options.out_path.empty()) {
     fclib::FclibInfo info = details.info;
     if (info.title.empty()) info.title = "solved by hapco-solve";
-    fclib::WriteFclibLocalProblem(options.out_path, problem, info);
-    fclib::WriteFclibSolution(options.out_path, result.force_n, result.displacement_m);
+    fclib::WriteFclibLocalProblem(options.out_path, judged, info);
+    const Eigen::VectorXd u = judged.flexibility_m_per_n * solve.result.force_n + judged.free_displacement_m;
+    fclib::WriteFclibSolution(options.out_path, solve.result.force_n, u);
     std::printf("solution      written to %s (FCLIB /solution)\n", options.out_path.c_str());
   }
-  return status == contact::SolverStatus::kConverged ? kExitConverged : kExitNotConverged;
+  return ExitCodeOf(solve.status);
+}
+
+const char* ReadingName(fclib::TripletReading reading) {
+  switch (reading) {
+    case fclib::TripletReading::kNotTriplet:
+      return "";
+    case fclib::TripletReading::kRowsInI:
+      return ", rows in i (CSparse, as Siconos writes)";
+    case fclib::TripletReading::kRowsInP:
+      return ", rows in p (as fclib.h documents)";
+  }
+  return "";
+}
+
+int RunGlobal(const Options& options) {
+  fclib::FclibGlobalDetails details;
+  const contact::GlobalContactProblem global = fclib::ReadFclibGlobalProblem(options.problem_path, &details);
+  const std::optional<fclib::FclibGlobalSolution> stored_solution =
+      fclib::ReadFclibGlobalSolution(options.problem_path);
+  const int n = global.num_dofs(), m = global.num_contacts();
+  std::printf("file          %s\n", options.problem_path.c_str());
+  if (!details.info.title.empty()) std::printf("title         %s\n", details.info.title.c_str());
+  std::printf("problem       global (M v = H r + f, u = H^T v + w): %d dofs, %d contacts\n", n, m);
+  std::printf("M             %d x %d, %s, %d stored entries, max|M - M^T| / max|M| = %.2e\n", n, n,
+              fclib::StorageName(details.m_storage), details.m_stored_entries, details.m_relative_asymmetry);
+  std::printf("H             %d x %d, %s%s, %d stored entries\n", n, 3 * m, fclib::StorageName(details.h_storage),
+              ReadingName(details.h_triplet_reading), details.h_stored_entries);
+  std::printf("contacts      %d, mu in [%g, %g]\n", m, global.mu.minCoeff(), global.mu.maxCoeff());
+  if (stored_solution) {
+    const contact::GlobalResidual residual =
+        contact::ComputeGlobalResidual(global, stored_solution->velocity, stored_solution->force);
+    std::printf("stored solution global residual: momentum %.3e, complementarity %.3e\n", residual.momentum,
+                residual.complementarity);
+  }
+  const hapco::delassus::GlobalToLocal reduction(global);
+  const hapco::delassus::DelassusStats& d = reduction.stats();
+  std::printf("delassus      W = H^T M^-1 H %d x %d: factor %.4f s (L %ld nonzeros, %.2f MiB), W %.4f s "
+              "(%d batched solves of <= %d columns), W %.2f MiB, peak memory %.1f MiB\n",
+              3 * m, 3 * m, d.factorization_seconds, d.factor_nonzeros, d.factor_bytes / 1048576.0,
+              d.operator_seconds, d.solve_batches, d.rhs_per_batch, d.operator_bytes / 1048576.0,
+              hapco::PeakResidentBytes() / 1048576.0);
+  const contact::ContactProblem& local = reduction.local();
+  const LocalSolve solve = SolveLocal(options, local, contact::ContactProblem{});
+  PrintSolve(options, local, solve);
+  const Eigen::VectorXd v = reduction.GlobalVelocity(solve.result.force_n);
+  const contact::GlobalResidual residual = contact::ComputeGlobalResidual(global, v, solve.result.force_n);
+  std::printf("global        v = M^-1 (H r + f); residual from M, H, f, w: momentum %.3e, complementarity "
+              "%.3e\n",
+              residual.momentum, residual.complementarity);
+  if (!options.out_path.empty()) {
+    fclib::FclibInfo info = details.info;
+    if (info.title.empty()) info.title = "solved by hapco-solve";
+    fclib::WriteFclibGlobalProblem(options.out_path, global, info);
+    fclib::WriteFclibGlobalSolution(options.out_path, {v, solve.result.force_n, residual.u});
+    std::printf("solution      written to %s (FCLIB /solution: v, r, u)\n", options.out_path.c_str());
+  }
+  return ExitCodeOf(solve.status);
+}
+
+int Run(const Options& options) {
+  return fclib::ReadFclibKind(options.problem_path) == fclib::FclibKind::kGlobal ? RunGlobal(options)
+                                                                                  : RunLocal(options);
 }
 
 }  // namespace
