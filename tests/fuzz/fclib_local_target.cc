@@ -1,4 +1,5 @@
-// FCLIB local-problem files. libfclib reads by file name and calls exit(1) on what it cannot
+// FCLIB files, local and global problems (the harness keeps its historical name). libfclib
+// reads by file name and calls exit(1) on what it cannot
 // read, and HDF5 trusts the file's metadata, so fclib_io's own HDF5 pre-checks must refuse
 // every malformed layout before libfclib sees it. Two modes, by the first byte:
 //   'L' + bytes: a layout written with the HDF5 API from fuzzed fields (types, sizes, index
@@ -113,7 +114,38 @@ bool WriteLayout(const std::string& path, Fields* f) {
   hid_t file = H5Fcreate(path.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
   if (file < 0) return false;
   const std::uint8_t groups = f->Byte();
-  if (groups & 1u) Group(file, "/fclib_global");
+  if (groups & 1u) {
+    Group(file, "/fclib_global");
+    if (groups & 128u) {  // a global problem's layout (M, H, optional G, vectors)
+      WriteScalar(file, "/fclib_global/spacedim", (groups & 4u) ? f->Int() : 3, f);
+      const int n = f->Int(), nc3 = f->Int();
+      for (const char* matrix : {"M", "H"}) {
+        const std::string g = std::string("/fclib_global/") + matrix;
+        Group(file, g.c_str());
+        const int rows = n, cols = matrix[0] == 'M' ? n : nc3, nz = f->Int(), nzmax = f->Int();
+        WriteScalar(file, g + "/m", rows, f);
+        WriteScalar(file, g + "/n", cols, f);
+        WriteScalar(file, g + "/nz", nz, f);
+        WriteScalar(file, g + "/nzmax", nzmax, f);
+        WriteDataset(file, g + "/p", nz >= 0 ? nz : cols + 1, f);
+        WriteDataset(file, g + "/i", nz >= 0 ? nz : nzmax, f);
+        WriteDataset(file, g + "/x", nzmax, f);
+      }
+      if (groups & 8u) Group(file, "/fclib_global/G");
+      Group(file, "/fclib_global/vectors");
+      WriteDataset(file, "/fclib_global/vectors/f", n, f);
+      WriteDataset(file, "/fclib_global/vectors/w", nc3, f);
+      WriteDataset(file, "/fclib_global/vectors/mu", nc3 / 3, f);
+      if (groups & 64u) {
+        Group(file, "/solution");
+        WriteDataset(file, "/solution/v", n, f);
+        WriteDataset(file, "/solution/r", nc3, f);
+        WriteDataset(file, "/solution/u", nc3, f);
+      }
+      H5Fclose(file);
+      return true;
+    }
+  }
   if (!(groups & 2u)) {
     Group(file, "/fclib_local");
     const int m = f->Int(), n = f->Int(), nz = f->Int(), nzmax = f->Int();
@@ -173,6 +205,17 @@ int FclibLocal(const std::uint8_t* data, std::size_t size) {
     if (!written) return 0;
   }
   try {
+    if (fclib::ReadFclibKind(path) == fclib::FclibKind::kGlobal) {
+      fclib::FclibGlobalDetails details;
+      const contact::GlobalContactProblem problem = fclib::ReadFclibGlobalProblem(path, &details);
+      HAPCO_FUZZ_CHECK(problem.num_contacts() >= 1 && problem.num_contacts() <= fclib::kMaxContacts,
+                       "accepted a contact count out of range");
+      HAPCO_FUZZ_CHECK(problem.h.rows() == problem.m.rows() && problem.h.cols() == 3 * problem.num_contacts(),
+                       "accepted inconsistent sizes");
+      const auto solution = fclib::ReadFclibGlobalSolution(path);
+      if (solution) HAPCO_FUZZ_CHECK(solution->velocity.size() == problem.m.rows(), "solution of another size");
+      throw InputError("done");  // the local reader below is for local files
+    }
     fclib::FclibFileDetails details;
     const contact::ContactProblem problem = fclib::ReadFclibLocalProblem(path, &details);
     const int m = problem.num_contacts();
