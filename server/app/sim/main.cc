@@ -15,6 +15,10 @@
 
 #include "common/cli.h"
 #include "common/error.h"
+#ifdef HAPCO_HAVE_FCLIB
+#include "fclib/fclib_io.h"
+#include "sim/global_export.h"
+#endif
 #include "common/timer.h"
 #include "io/scene_file.h"
 #include "io/trajectory_file.h"
@@ -53,6 +57,11 @@ detection, flexibility operator, frictional contact solve, force on the device.
   --vtk-every N     VTK output period in steps
   --record FILE     write a HapCo recording (header with the scene, one record per step with
                     forces, contact states and timings); read it with hapco-report
+  --fclib DIR       write the contact problem of every --fclib-every-th step with contacts,
+                    and of every step that did not converge, as FCLIB files for other solvers:
+                    DIR/step_NNNNNN_local.hdf5 (W, q, mu) and DIR/step_NNNNNN_global.hdf5
+                    (M = both bodies' K_ff, H = contact Jacobian, f, w); solve with hapco-solve
+  --fclib-every N   FCLIB export period in steps (default 10)
   --quiet           no progress line
   --help            this text
 
@@ -63,7 +72,8 @@ struct Options {
   std::string scene_path, csv_path, vtk_dir, record_path, solver_name, mode = "precomputed", trajectory_path, client_id;
   hapco::sim::PoseLimits limits;
   double tolerance_m = 0, friction = -1, rho_scale = 1;
-  int max_iterations = 0, steps = 0, vtk_every = 10;
+  std::string fclib_dir;
+  int max_iterations = 0, steps = 0, vtk_every = 10, fclib_every = 10;
   bool cold = false, quiet = false;
 };
 
@@ -116,6 +126,10 @@ Options Parse(int argc, char** argv) {
       options.vtk_dir = value();
     } else if (arg == "--vtk-every") {
       options.vtk_every = static_cast<int>(hapco::cli::ParseInteger("--vtk-every", value(), 1, 100000000));
+    } else if (arg == "--fclib") {
+      options.fclib_dir = value();
+    } else if (arg == "--fclib-every") {
+      options.fclib_every = static_cast<int>(hapco::cli::ParseInteger("--fclib-every", value(), 1, 100000000));
     } else if (arg == "--quiet") {
       options.quiet = true;
     } else if (!arg.empty() && arg[0] == '-') {
@@ -128,6 +142,31 @@ Options Parse(int argc, char** argv) {
   }
   if (options.scene_path.empty()) throw hapco::InputError("missing SCENE argument (see --help)");
   return options;
+}
+
+// Writes the step's contact problem as a local and a global FCLIB file; returns the number of
+// files written (a step the global form cannot express, rigid against rigid, gets the local one).
+int WriteFclibStep(const std::string& dir, int step, const std::string& scene_name,
+                   const hapco::sim::TwoBodySession& session) {
+#ifndef HAPCO_HAVE_FCLIB
+  (void)dir, (void)step, (void)scene_name, (void)session;
+  throw hapco::InputError("--fclib: this hapco-sim was built without FCLIB (-DHAPCO_WITH_FCLIB=OFF)");
+#else
+  char stem[64];
+  std::snprintf(stem, sizeof stem, "/step_%06d", step);
+  const std::string title = "hapco-sim " + scene_name + " step " + std::to_string(step);
+  hapco::fclib::WriteFclibLocalProblem(dir + stem + "_local.hdf5", session.last_problem(),
+                                       {title, "local problem u = W r + q (m, N)", ""});
+  try {
+    const hapco::sim::StepGlobalProblem global = hapco::sim::GlobalProblemOfStep(session);
+    hapco::fclib::WriteFclibGlobalProblem(
+        dir + stem + "_global.hdf5", global.problem,
+        {title, "global problem M v = H r + f, u = H^T v + w: M = K_ff of both bodies (N/m), v in m, r in N", ""});
+    return 2;
+  } catch (const hapco::InputError&) {
+    return 1;
+  }
+#endif
 }
 
 // Writes the current state of the session as three VTK files and adds them to the collection.
@@ -257,6 +296,12 @@ int Run(const Options& options) {
     if (error) throw hapco::InputError("cannot create VTK directory " + options.vtk_dir + ": " + error.message());
     collection = std::make_unique<hapco::io::VtkCollection>(options.vtk_dir + "/hapco.pvd");
   }
+  if (!options.fclib_dir.empty()) {
+    std::error_code error;
+    std::filesystem::create_directories(options.fclib_dir, error);
+    if (error) throw hapco::InputError("cannot create FCLIB directory " + options.fclib_dir + ": " + error.message());
+  }
+  int fclib_written = 0;
   // The tool's translation per step: the scene's phases, or a file's rows (phase "file").
   std::vector<Eigen::Vector3d> file_points;
   if (!options.trajectory_path.empty()) file_points = hapco::io::LoadTrajectoryCsv(options.trajectory_path, options.client_id);
@@ -306,6 +351,10 @@ int Run(const Options& options) {
     if (collection && (step % options.vtk_every == 0 || step == steps)) {
       WriteVtkStep(options.vtk_dir, step, session, model, collection.get());
     }
+    if (!options.fclib_dir.empty() && out.num_contacts > 0 &&
+        (step % options.fclib_every == 0 || out.status != hapco::contact::SolverStatus::kConverged)) {
+      fclib_written += WriteFclibStep(options.fclib_dir, step, scene.name, session);
+    }
     if (progress && (step % 10 == 0 || step == steps)) {
       std::fprintf(stderr, "\rstep %d/%d  phase %-8s  |F| %7.3f N  contacts %3d  iterations %4d",
                    step, steps, phase_name(phase).c_str(),
@@ -316,6 +365,9 @@ int Run(const Options& options) {
   if (csv != nullptr) std::fclose(csv);
   if (recorder) std::printf("recording: %s (%lld records)\n", options.record_path.c_str(), static_cast<long long>(recorder->records_written()));
   if (collection) std::printf("ParaView: open %s/hapco.pvd\n", options.vtk_dir.c_str());
+  if (!options.fclib_dir.empty()) {
+    std::printf("FCLIB: %d files in %s (solve one with hapco-solve FILE)\n", fclib_written, options.fclib_dir.c_str());
+  }
   std::printf("%d steps in %.2f s: peak contact force %.3f N, %ld outer iterations, %d not converged\n",
               steps, run.ElapsedSeconds(), peak_force_n, total_iterations, not_converged);
   if (!ignored.empty()) {

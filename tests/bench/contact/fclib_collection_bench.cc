@@ -1,0 +1,213 @@
+// fclib_collection_bench [--tol 1e-6,1e-8] [--max-seconds S] --csv OUT.csv FILE.hdf5...
+//
+// Time to tolerance of HapCo's contact solvers and Siconos Numerics' NSGS and nonsmooth Newton
+// (Alart–Curnier, NSN_AC) on FCLIB files written by other tools (local problems as stored;
+// global problems reduced by the flexibility method, delassus/delassus.h, whose time is
+// reported apart and not counted). One judge for every solver: Siconos' fc3d_compute_error on
+// the file's own W (norm ‖q‖, as Siconos' drivers pass it). A solver whose own stop test passes
+// before the judge does is continued, warm-started, at a tenth of its tolerance, with the time
+// added, until the judge passes or max-seconds (CPU) is spent: a problem is solved when the
+// judge says so. Prints one line per run and writes the CSV that
+// scripts/plot_performance_profile.py reads (problem,solver,tolerance,seconds,converged,
+// iterations,error). Times are process CPU seconds. Never asserts on time.
+#include <time.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <Eigen/Dense>
+
+#include "contact/solver.h"
+#include "delassus/delassus.h"
+#include "fclib/fclib_io.h"
+
+extern "C" {
+#include <FrictionContactProblem.h>
+#include <Friction_cst.h>
+#include <NonSmoothDrivers.h>
+#include <NumericsMatrix.h>
+#include <NumericsVerbose.h>
+#include <SolverOptions.h>
+#include <fc3d_compute_error.h>
+}
+
+namespace {
+
+double CpuSeconds() {
+  timespec ts{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+  return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
+}
+
+// The file's problem as Siconos sees it (dense W, column-major), and the judge.
+class SiconosView {
+ public:
+  explicit SiconosView(const hapco::contact::ContactProblem& p)
+      : q_(p.free_displacement_m), mu_(p.friction_coefficient) {
+    const int n = static_cast<int>(q_.size());
+    m_ = NM_create(NM_DENSE, n, n);
+    std::memcpy(m_->matrix0, p.flexibility_m_per_n.data(), sizeof(double) * static_cast<std::size_t>(n) * n);
+    problem_.dimension = 3;
+    problem_.numberOfContacts = n / 3;
+    problem_.M = m_;
+    problem_.q = q_.data();
+    problem_.mu = mu_.data();
+  }
+  ~SiconosView() { NM_free(m_); }
+  SiconosView(const SiconosView&) = delete;
+  SiconosView& operator=(const SiconosView&) = delete;
+
+  double Judge(const Eigen::VectorXd& r) {
+    Eigen::VectorXd rr = r, u = Eigen::VectorXd::Zero(q_.size());
+    SolverOptions* options = solver_options_create(SICONOS_FRICTION_3D_NSGS);
+    double error = 0.0;
+    fc3d_compute_error(&problem_, rr.data(), u.data(), 0.0, options, q_.norm(), &error);
+    solver_options_delete(options);
+    return error;
+  }
+  // One Siconos run from r (warm), to `tol` on its own error; returns iterations done.
+  int Run(int solver_id, double tol, int max_iter, Eigen::VectorXd* r) {
+    SolverOptions* options = solver_options_create(solver_id);
+    options->iparam[SICONOS_IPARAM_MAX_ITER] = max_iter;
+    options->dparam[SICONOS_DPARAM_TOL] = tol;
+    Eigen::VectorXd u = Eigen::VectorXd::Zero(q_.size());
+    fc3d_driver(&problem_, r->data(), u.data(), options);
+    const int iterations = options->iparam[SICONOS_IPARAM_ITER_DONE];
+    solver_options_delete(options);
+    return iterations;
+  }
+
+ private:
+  Eigen::VectorXd q_, mu_;
+  NumericsMatrix* m_ = nullptr;
+  FrictionContactProblem problem_{};
+};
+
+struct Row {
+  std::string problem, solver;
+  double tolerance = 0, seconds = 0, error = 0;
+  bool converged = false;
+  int iterations = 0;
+};
+
+std::vector<double> ParseList(const std::string& text) {
+  std::vector<double> out;
+  std::stringstream in(text);
+  std::string item;
+  while (std::getline(in, item, ',')) out.push_back(std::atof(item.c_str()));
+  return out;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::vector<double> tolerances = {1e-6, 1e-8};
+  double max_seconds = 20.0;
+  std::string csv_path;
+  std::vector<std::string> files;
+  for (int k = 1; k < argc; ++k) {
+    const std::string arg = argv[k];
+    if (arg == "--help") {
+      std::puts("usage: fclib_collection_bench [--tol 1e-6,1e-8] [--max-seconds S] --csv OUT.csv FILE.hdf5...");
+      return 0;
+    } else if (arg == "--tol" && k + 1 < argc) {
+      tolerances = ParseList(argv[++k]);
+    } else if (arg == "--max-seconds" && k + 1 < argc) {
+      max_seconds = std::atof(argv[++k]);
+    } else if (arg == "--csv" && k + 1 < argc) {
+      csv_path = argv[++k];
+    } else if (arg.rfind("--", 0) == 0) {
+      std::fprintf(stderr, "fclib_collection_bench: unknown option %s\n", arg.c_str());
+      return 1;
+    } else {
+      files.push_back(arg);
+    }
+  }
+  if (files.empty() || csv_path.empty()) {
+    std::fprintf(stderr, "fclib_collection_bench: give --csv OUT.csv and FCLIB files (--help)\n");
+    return 1;
+  }
+  namespace contact = hapco::contact;
+  namespace fclib = hapco::fclib;
+  numerics_set_verbose(0);
+  std::vector<Row> rows;
+  const char* solvers[] = {"local-uzawa", "global-uzawa-gs", "reference", "siconos-nsgs", "siconos-nsn-ac"};
+  std::printf("%-44s %5s %6s %-16s %8s %10s %7s %10s\n", "problem", "m", "tol", "solver", "solved", "cpu_s",
+              "iters", "judge");
+  for (const std::string& file : files) {
+    const std::string name = std::filesystem::path(file).stem().string();
+    contact::ContactProblem problem, stored;
+    try {
+      if (fclib::ReadFclibKind(file) == fclib::FclibKind::kGlobal) {
+        const contact::GlobalContactProblem global = fclib::ReadFclibGlobalProblem(file);
+        const hapco::delassus::GlobalToLocal reduction(global);
+        problem = reduction.local();
+        std::printf("%-44s delassus: factor %.4f s, W %.4f s\n", name.c_str(),
+                    reduction.stats().factorization_seconds, reduction.stats().operator_seconds);
+      } else {
+        fclib::FclibFileDetails details;
+        problem = fclib::ReadFclibLocalProblem(file, &details);
+        if (details.stored_problem.num_contacts() > 0) stored = details.stored_problem;
+      }
+    } catch (const std::exception& error) {
+      std::printf("%-44s skipped: %s\n", name.c_str(), error.what());
+      continue;
+    }
+    const contact::ContactProblem& judged = stored.num_contacts() > 0 ? stored : problem;
+    SiconosView siconos(judged);
+    const int m = problem.num_contacts();
+    for (const double tol : tolerances) {
+      for (const char* solver : solvers) {
+        Row row{name, solver, tol};
+        Eigen::VectorXd r = Eigen::VectorXd::Zero(3 * m);
+        double run_tol = tol;
+        const bool is_siconos = std::strncmp(solver, "siconos", 7) == 0;
+        contact::SolverWorkspace workspace;
+        contact::SolverResult result;
+        for (int attempt = 0; attempt < 6; ++attempt) {
+          const double start = CpuSeconds();
+          if (is_siconos) {
+            const int id = std::strcmp(solver, "siconos-nsgs") == 0 ? SICONOS_FRICTION_3D_NSGS : SICONOS_FRICTION_3D_NSN_AC;
+            row.iterations += siconos.Run(id, run_tol, 100000, &r);
+          } else {
+            contact::SolverParameters params;
+            params.fc3d_tolerance = run_tol;
+            params.global_tolerance_m = 1e-300;  // the fc3d test only
+            params.max_iterations = 100000;
+            params.time_budget_s = std::max(0.0, max_seconds - row.seconds);
+            params.warm_start = attempt > 0;
+            if (attempt > 0) result.force_n = r;
+            contact::Solve(contact::ParseSolverKind(solver), stored.num_contacts() > 0 ? stored : problem, params,
+                           &workspace, &result);
+            r = result.force_n;
+            row.iterations += result.stats.iterations;
+          }
+          row.seconds += CpuSeconds() - start;
+          row.error = r.allFinite() ? siconos.Judge(r) : 1e300;
+          row.converged = row.error <= tol;
+          if (row.converged || row.seconds >= max_seconds || !r.allFinite()) break;
+          run_tol /= 10.0;
+        }
+        std::printf("%-44s %5d %6.0e %-16s %8s %10.4g %7d %10.3e\n", name.c_str(), m, tol, solver,
+                    row.converged ? "yes" : "no", row.seconds, row.iterations, row.error);
+        std::fflush(stdout);
+        rows.push_back(row);
+      }
+    }
+  }
+  std::ofstream csv(csv_path);
+  csv << "problem,solver,tolerance,seconds,converged,iterations,error\n";
+  for (const Row& row : rows) {
+    csv << row.problem << ',' << row.solver << ',' << row.tolerance << ',' << row.seconds << ','
+        << (row.converged ? 1 : 0) << ',' << row.iterations << ',' << row.error << '\n';
+  }
+  std::printf("wrote %zu runs to %s\n", rows.size(), csv_path.c_str());
+  return 0;
+}
