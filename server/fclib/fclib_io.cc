@@ -2,6 +2,7 @@
 
 #include "fclib/fclib_c.h"
 #include <hdf5.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -417,10 +418,11 @@ void ProbeInChildProcess(const std::string& path, const Checks& checks) {
 }
 
 LocalLayout CheckFileInProcess(const std::string& path, bool* has_solution, bool* has_global);
+void ProbeFileOnce(const std::string& path);
 
 LocalLayout CheckFile(const std::string& path, bool* has_solution = nullptr,
                       bool* has_global = nullptr) {
-  ProbeInChildProcess(path, [&] { CheckFileInProcess(path, nullptr, nullptr); });
+  ProbeFileOnce(path);
   return CheckFileInProcess(path, has_solution, has_global);
 }
 
@@ -649,8 +651,77 @@ GlobalLayout CheckGlobalFileInProcess(const std::string& path, bool* has_solutio
 }
 
 GlobalLayout CheckGlobalFile(const std::string& path, bool* has_solution = nullptr) {
-  ProbeInChildProcess(path, [&] { CheckGlobalFileInProcess(path, nullptr); });
+  ProbeFileOnce(path);
   return CheckGlobalFileInProcess(path, has_solution);
+}
+
+// The datasets fclib_read_solution reads: v (n_v entries, 0 = none), r and u (n_r each).
+void CheckSolutionInProcess(const std::string& path, int n_r, int n_v) {
+  SilenceHdf5();
+  H5Id file(H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT), H5Fclose);
+  RequireGroup(file.get(), path, "/solution");
+  if (n_v > 0) RequireNumbers(file.get(), path, "/solution/v", n_v);
+  RequireNumbers(file.get(), path, "/solution/r", n_r);
+  RequireNumbers(file.get(), path, "/solution/u", n_r);
+}
+
+FclibKind KindInProcess(const std::string& path) {
+  SilenceHdf5();
+  CheckIsHdf5File(path);
+  H5Id file(H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT), H5Fclose);
+  if (!file.valid()) Fail(path, "cannot be opened by HDF5 (corrupt or locked?)");
+  if (Exists(file.get(), "/fclib_local")) return FclibKind::kLocal;
+  if (Exists(file.get(), "/fclib_global")) return FclibKind::kGlobal;
+  Fail(path, "is an HDF5 file but not an FCLIB problem (neither /fclib_local nor /fclib_global)");
+}
+
+// Every check any reader here runs on a file, each branch on its own: whatever a reader does
+// in-process is a prefix of one of these branches, so a file that passed them all in the
+// child cannot crash HDF5 in the parent (same file, same deterministic calls).
+void CheckEverythingInProcess(const std::string& path) {
+  auto branch = [](const auto& checks) {
+    try {
+      checks();
+    } catch (const InputError&) {
+    } catch (const std::bad_alloc&) {
+    }
+  };
+  branch([&] { KindInProcess(path); });
+  branch([&] {
+    bool has_solution = false, has_global = false;
+    const LocalLayout layout = CheckFileInProcess(path, &has_solution, &has_global);
+    if (has_solution && !has_global) CheckSolutionInProcess(path, layout.n, 0);
+  });
+  branch([&] {
+    bool has_solution = false;
+    const GlobalLayout layout = CheckGlobalFileInProcess(path, &has_solution);
+    if (has_solution) CheckSolutionInProcess(path, layout.local_size(), layout.dofs());
+  });
+}
+
+// Probes a file once per content: the child process of ProbeInChildProcess runs every check
+// (CheckEverythingInProcess), and a file whose identity (device, inode, size, modification
+// and change times, ns) is the one probed last is not probed again. A reader's several opens
+// of one file (kind, problem, solution) then cost one fork, not three.
+void ProbeFileOnce(const std::string& path) {
+  struct Identity {
+    dev_t device;
+    ino_t inode;
+    off_t size;
+    long modified_s, modified_ns, changed_s, changed_ns;
+    bool operator==(const Identity&) const = default;
+  };
+  static std::optional<Identity> last_probed;
+  struct stat info {};
+  std::optional<Identity> identity;
+  if (stat(path.c_str(), &info) == 0) {
+    identity = Identity{info.st_dev, info.st_ino, info.st_size, info.st_mtim.tv_sec, info.st_mtim.tv_nsec,
+                        info.st_ctim.tv_sec, info.st_ctim.tv_nsec};
+    if (last_probed && *last_probed == *identity) return;
+  }
+  last_probed.reset();
+  ProbeInChildProcess(path, [&] { CheckEverythingInProcess(path); });
+  last_probed = identity;
 }
 
 struct GlobalDeleter {
@@ -956,15 +1027,7 @@ std::optional<FclibSolution> ReadFclibSolution(const std::string& path) {
   if (has_global) {
     Fail(path, "also holds a global problem; its solution would be sized from it");
   }
-  const auto check_solution = [&] {
-    SilenceHdf5();
-    H5Id file(H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT), H5Fclose);
-    RequireGroup(file.get(), path, "/solution");
-    RequireNumbers(file.get(), path, "/solution/r", layout.n);
-    RequireNumbers(file.get(), path, "/solution/u", layout.n);
-  };
-  ProbeInChildProcess(path, check_solution);
-  check_solution();
+  CheckSolutionInProcess(path, layout.n, 0);  // probed with the file (ProbeFileOnce)
   SolutionPtr solution(fclib_read_solution(path.c_str()));
   if (!solution) Fail(path, "libfclib could not read the solution");
   FclibSolution out;
@@ -1001,17 +1064,8 @@ double RelativeAsymmetry(const Eigen::MatrixXd& w) {
 }
 
 FclibKind ReadFclibKind(const std::string& path) {
-  auto kind_in_process = [&] {
-    SilenceHdf5();
-    CheckIsHdf5File(path);
-    H5Id file(H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT), H5Fclose);
-    if (!file.valid()) Fail(path, "cannot be opened by HDF5 (corrupt or locked?)");
-    if (Exists(file.get(), "/fclib_local")) return FclibKind::kLocal;
-    if (Exists(file.get(), "/fclib_global")) return FclibKind::kGlobal;
-    Fail(path, "is an HDF5 file but not an FCLIB problem (neither /fclib_local nor /fclib_global)");
-  };
-  ProbeInChildProcess(path, [&] { kind_in_process(); });
-  return kind_in_process();
+  ProbeFileOnce(path);
+  return KindInProcess(path);
 }
 
 contact::GlobalContactProblem ReadFclibGlobalProblem(const std::string& path, FclibGlobalDetails* details) {
@@ -1149,16 +1203,7 @@ std::optional<FclibGlobalSolution> ReadFclibGlobalSolution(const std::string& pa
   bool has_solution = false;
   const GlobalLayout layout = CheckGlobalFile(path, &has_solution);
   if (!has_solution) return std::nullopt;
-  const auto check_solution = [&] {
-    SilenceHdf5();
-    H5Id file(H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT), H5Fclose);
-    RequireGroup(file.get(), path, "/solution");
-    RequireNumbers(file.get(), path, "/solution/v", layout.dofs());
-    RequireNumbers(file.get(), path, "/solution/r", layout.local_size());
-    RequireNumbers(file.get(), path, "/solution/u", layout.local_size());
-  };
-  ProbeInChildProcess(path, check_solution);
-  check_solution();
+  CheckSolutionInProcess(path, layout.local_size(), layout.dofs());  // probed with the file
   SolutionPtr solution(fclib_read_solution(path.c_str()));
   if (!solution) Fail(path, "libfclib could not read the solution");
   FclibGlobalSolution out;

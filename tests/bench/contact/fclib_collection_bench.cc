@@ -72,16 +72,29 @@ class SiconosView {
     solver_options_delete(options);
     return error;
   }
-  // One Siconos run from r (warm), to `tol` on its own error; returns iterations done.
-  int Run(int solver_id, double tol, int max_iter, Eigen::VectorXd* r) {
-    SolverOptions* options = solver_options_create(solver_id);
-    options->iparam[SICONOS_IPARAM_MAX_ITER] = max_iter;
-    options->dparam[SICONOS_DPARAM_TOL] = tol;
-    Eigen::VectorXd u = Eigen::VectorXd::Zero(q_.size());
-    fc3d_driver(&problem_, r->data(), u.data(), options);
-    const int iterations = options->iparam[SICONOS_IPARAM_ITER_DONE];
-    solver_options_delete(options);
-    return iterations;
+  // Siconos from r (warm) to `tol` on its own error, within `seconds` of CPU: Siconos has no
+  // time budget, so it runs in chunks of iterations (1, 2, 4, ...), each warm-started from the
+  // last (r is all the state NSGS and the Newton iteration keep), and stops after the chunk
+  // that crosses `seconds` (so it may overshoot by up to the last chunk); returns iterations.
+  int Run(int solver_id, double tol, double seconds, Eigen::VectorXd* r) {
+    const double start = CpuSeconds();
+    int done = 0;
+    for (int chunk = 1; CpuSeconds() - start < seconds; chunk = std::min(2 * chunk, 1 << 20)) {
+      SolverOptions* options = solver_options_create(solver_id);
+      options->iparam[SICONOS_IPARAM_MAX_ITER] = chunk;
+      options->dparam[SICONOS_DPARAM_TOL] = tol;
+      Eigen::VectorXd u = Eigen::VectorXd::Zero(q_.size());
+      const Eigen::VectorXd before = *r;
+      const int info = fc3d_driver(&problem_, r->data(), u.data(), options);
+      done += options->iparam[SICONOS_IPARAM_ITER_DONE];
+      solver_options_delete(options);
+      if (!r->allFinite()) {
+        *r = before;  // keep the last finite iterate, as HapCo's solvers do
+        break;
+      }
+      if (info == 0) break;
+    }
+    return done;
   }
 
  private:
@@ -138,6 +151,8 @@ int main(int argc, char** argv) {
   namespace fclib = hapco::fclib;
   numerics_set_verbose(0);
   std::vector<Row> rows;
+  std::ofstream csv(csv_path);  // written row by row: a long run keeps what it measured
+  csv << "problem,solver,tolerance,seconds,converged,iterations,error\n";
   const char* solvers[] = {"local-uzawa", "global-uzawa-gs", "reference", "siconos-nsgs", "siconos-nsn-ac"};
   std::printf("%-44s %5s %6s %-16s %8s %10s %7s %10s\n", "problem", "m", "tol", "solver", "solved", "cpu_s",
               "iters", "judge");
@@ -175,7 +190,7 @@ int main(int argc, char** argv) {
           const double start = CpuSeconds();
           if (is_siconos) {
             const int id = std::strcmp(solver, "siconos-nsgs") == 0 ? SICONOS_FRICTION_3D_NSGS : SICONOS_FRICTION_3D_NSN_AC;
-            row.iterations += siconos.Run(id, run_tol, 100000, &r);
+            row.iterations += siconos.Run(id, run_tol, std::max(0.0, max_seconds - row.seconds), &r);
           } else {
             contact::SolverParameters params;
             params.fc3d_tolerance = run_tol;
@@ -199,14 +214,10 @@ int main(int argc, char** argv) {
                     row.converged ? "yes" : "no", row.seconds, row.iterations, row.error);
         std::fflush(stdout);
         rows.push_back(row);
+        csv << row.problem << ',' << row.solver << ',' << row.tolerance << ',' << row.seconds << ','
+            << (row.converged ? 1 : 0) << ',' << row.iterations << ',' << row.error << '\n' << std::flush;
       }
     }
-  }
-  std::ofstream csv(csv_path);
-  csv << "problem,solver,tolerance,seconds,converged,iterations,error\n";
-  for (const Row& row : rows) {
-    csv << row.problem << ',' << row.solver << ',' << row.tolerance << ',' << row.seconds << ','
-        << (row.converged ? 1 : 0) << ',' << row.iterations << ',' << row.error << '\n';
   }
   std::printf("wrote %zu runs to %s\n", rows.size(), csv_path.c_str());
   return 0;
