@@ -17,7 +17,7 @@
 //    accepted up to kMaxRelativeAsymmetry, the problem gets the symmetric part (W + Wᵀ)/2 and
 //    FclibFileDetails keeps the W as stored (see there).
 // Not supported (InputError): mixed problems with V, R, s, spacedim != 3, W not 3m × 3m, more
-// than kMaxContacts contacts (W is dense here). Global problems: fclib_global.h.
+// than kMaxContacts contacts (W is dense here). Global problems: see the second half below.
 //
 // Every failure throws hapco::InputError naming the file and what is wrong. The file is
 // checked with HDF5 before libfclib sees it, because libfclib calls exit(1) on a malformed
