@@ -103,6 +103,9 @@ import scipy.sparse as sp  # noqa: E402
 import scipy.sparse.linalg as spla  # noqa: E402
 from scipy.spatial import cKDTree  # noqa: E402
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from fclib_h5 import doubles, fixed_string, int1, ints, write_matrix  # noqa: E402,F401
+
 GRAVITY = 9.81  # m/s^2
 DENSITY = 2500.0  # kg/m^3 (glass)
 TIME_STEP = 1e-3  # s
@@ -115,42 +118,7 @@ JITTER = 1e-5  # m
 MU_DEFAULT = 0.3
 
 # ----------------------------------------------------------------------------- HDF5 helpers
-# (copied from scripts/make_siconos_style_fclib.py: the layout libfclib writes)
-
-
-def int1(group, name, value):
-    group.create_dataset(name, data=np.array([value], dtype="<i4"), track_times=False)
-
-
-def ints(group, name, values):
-    group.create_dataset(name, data=np.asarray(values, dtype="<i4"), track_times=False)
-
-
-def doubles(group, name, values):
-    group.create_dataset(name, data=np.asarray(values, dtype="<f8"), track_times=False)
-
-
-def fixed_string(group, name, text):
-    """Scalar, fixed-length, NUL-terminated ASCII: what H5LTmake_dataset_string writes."""
-    raw = text.encode("ascii")
-    tid = h5py.h5t.C_S1.copy()
-    tid.set_size(len(raw) + 1)
-    tid.set_strpad(h5py.h5t.STR_NULLTERM)
-    space = h5py.h5s.create(h5py.h5s.SCALAR)
-    dcpl = h5py.h5p.create(h5py.h5p.DATASET_CREATE)
-    dcpl.set_obj_track_times(False)  # reproducible files
-    dset = h5py.h5d.create(group.id, name.encode("ascii"), tid, space, dcpl=dcpl)
-    dset.write(h5py.h5s.ALL, h5py.h5s.ALL, np.array(raw + b"\0", dtype="S%d" % (len(raw) + 1)))
-
-
-def write_matrix(group, m, n, nz, nzmax, p, i, x):
-    int1(group, "nzmax", nzmax)
-    int1(group, "m", m)
-    int1(group, "n", n)
-    int1(group, "nz", nz)
-    ints(group, "p", p)
-    ints(group, "i", i)
-    doubles(group, "x", x)
+# fclib_h5 (this directory): the layout libfclib writes.
 
 
 def write_info(top, title, description, math_info, ndof=None):
