@@ -58,6 +58,11 @@ int Run(int argc, char** argv) {
   hapco::io::RecordingReadReport report;
   const auto records = hapco::io::ReadRecording(path, &report);
   std::printf("recording  %s: %s\n", path.c_str(), report.Summary().c_str());
+  if (records.empty()) {
+    // Not even the header survived (a file cut right after it was created): nothing to report.
+    throw hapco::InputError(path + " holds no complete record (" + report.Summary() +
+                            "): the file was cut before its first record ended");
+  }
   std::vector<const hapco::recording::Step*> steps;
   std::vector<const hapco::recording::ServerStatus*> statuses;
   bool have_header = false;

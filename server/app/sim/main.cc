@@ -238,6 +238,40 @@ hapco::recording::Step MakeStepRecord(const hapco::sim::StepOutput& out, int pha
   return record;
 }
 
+// An output written under PATH.partial and moved onto PATH only when the run completes, so that
+// a run that fails leaves the user's existing file as it was. A partial CSV is removed; a
+// partial recording is kept (nothing recorded is thrown away) under its .partial name.
+class PendingOutput {
+ public:
+  PendingOutput(std::string path, bool keep_partial_on_failure)
+      : path_(std::move(path)), partial_(path_.empty() ? "" : path_ + ".partial"), keep_(keep_partial_on_failure) {}
+  PendingOutput(const PendingOutput&) = delete;
+  PendingOutput& operator=(const PendingOutput&) = delete;
+  ~PendingOutput() {
+    if (path_.empty() || committed_) return;
+    std::error_code error;
+    if (!keep_) {
+      std::filesystem::remove(partial_, error);
+    } else if (std::filesystem::exists(partial_, error)) {
+      std::fprintf(stderr, "hapco-sim: the run failed; what was recorded is in %s (%s untouched)\n", partial_.c_str(),
+                   path_.c_str());
+    }
+  }
+  const std::string& partial() const { return partial_; }
+  void Commit() {
+    if (path_.empty()) return;
+    std::error_code error;
+    std::filesystem::rename(partial_, path_, error);
+    if (error) throw hapco::InputError("cannot move " + partial_ + " to " + path_ + ": " + error.message());
+    committed_ = true;
+  }
+
+ private:
+  std::string path_, partial_;
+  bool keep_;
+  bool committed_ = false;
+};
+
 int Run(const Options& options) {
   hapco::sim::SceneSpec scene = hapco::io::LoadSceneFile(options.scene_path);
   if (options.friction >= 0) scene.friction_coefficient = options.friction;
@@ -247,11 +281,14 @@ int Run(const Options& options) {
   scene.solver_parameters.rho_scale = options.rho_scale;
   if (options.cold) scene.solver_parameters.warm_start = false;
 
+  PendingOutput csv_output(options.csv_path, false), record_output(options.record_path, true);
   std::FILE* csv = nullptr;
   if (!options.csv_path.empty()) {
-    csv = std::fopen(options.csv_path.c_str(), "w");
-    if (csv == nullptr) throw hapco::InputError("cannot write " + options.csv_path);
+    csv = std::fopen(csv_output.partial().c_str(), "w");
+    if (csv == nullptr) throw hapco::InputError("cannot write " + options.csv_path + " (as " + csv_output.partial() + ")");
   }
+  // The CSV stream is closed on every path out of Run (its partial file is then removed).
+  const std::unique_ptr<std::FILE, int (*)(std::FILE*)> csv_closer(csv, [](std::FILE* f) { return f ? std::fclose(f) : 0; });
   hapco::Stopwatch setup;
   const hapco::sim::TwoBodyModel model(scene);
   const auto& model_stats = model.stats();
@@ -287,7 +324,7 @@ int Run(const Options& options) {
     header.set_created_unix_ns(std::chrono::duration_cast<std::chrono::nanoseconds>(
                                    std::chrono::system_clock::now().time_since_epoch()).count());
     header.set_solver(std::string(hapco::contact::SolverName(session.solver)));
-    recorder = std::make_unique<hapco::io::RecordingWriter>(options.record_path, header);
+    recorder = std::make_unique<hapco::io::RecordingWriter>(record_output.partial(), header);
   }
   std::unique_ptr<hapco::io::VtkCollection> collection;
   if (!options.vtk_dir.empty()) {
@@ -362,8 +399,14 @@ int Run(const Options& options) {
     }
   }
   if (progress) std::fputc('\n', stderr);
-  if (csv != nullptr) std::fclose(csv);
-  if (recorder) std::printf("recording: %s (%lld records)\n", options.record_path.c_str(), static_cast<long long>(recorder->records_written()));
+  if (csv != nullptr && std::fflush(csv) != 0) throw hapco::InputError("cannot write " + csv_output.partial());
+  csv_output.Commit();
+  if (recorder) {
+    const long long records = static_cast<long long>(recorder->records_written());
+    recorder.reset();  // closes the file
+    record_output.Commit();
+    std::printf("recording: %s (%lld records)\n", options.record_path.c_str(), records);
+  }
   if (collection) std::printf("ParaView: open %s/hapco.pvd\n", options.vtk_dir.c_str());
   if (!options.fclib_dir.empty()) {
     std::printf("FCLIB: %d files in %s (solve one with hapco-solve FILE)\n", fclib_written, options.fclib_dir.c_str());
