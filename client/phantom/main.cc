@@ -168,7 +168,9 @@ int Run(const Options& o) {
 
   phantom::PhantomClient client(config);
   std::string why;
-  if (!client.Connect(&why)) {
+  if (!client.Connect(&why, [&o](const std::string& line) {
+        std::fprintf(stderr, "hapco-phantom %s: %s\n", o.client_id.c_str(), line.c_str());
+      })) {
     std::fprintf(stderr, "hapco-phantom: %s\n", why.c_str());
     if (csv != nullptr) std::fclose(csv);
     return 2;

@@ -82,12 +82,31 @@ void PhantomClient::OnForcesAvailable() {
   }
 }
 
-bool PhantomClient::Connect(std::string* why) {
+bool PhantomClient::Connect(std::string* why, const std::function<void(const std::string&)>& progress) {
   const auto timeout_ns = static_cast<dds_duration_t>(config_.connect_timeout_s * 1e9);
-  if (!dds_->pose_writer.WaitForReaders(1, timeout_ns) || !dds_->session_writer.WaitForReaders(1, timeout_ns)) {
+  // Wait for the server's pose reader in slices, saying so after 0.5 s and every 5 s after.
+  bool found = false;
+  dds_duration_t waited_ns = 0;
+  for (dds_duration_t slice_ns = DDS_MSECS(500); waited_ns < timeout_ns; slice_ns = DDS_SECS(5)) {
+    const dds_duration_t this_slice = std::min(slice_ns, timeout_ns - waited_ns);
+    if (dds_->pose_writer.WaitForReaders(1, this_slice)) {
+      found = true;
+      break;
+    }
+    waited_ns += this_slice;
+    if (progress && waited_ns < timeout_ns) {
+      char line[200];
+      std::snprintf(line, sizeof line, "waiting for a hapco-server in domain %d (%.1f s of %.0f s)...", config_.domain,
+                    static_cast<double>(waited_ns) * 1e-9, config_.connect_timeout_s);
+      progress(line);
+    }
+  }
+  if (!found || !dds_->session_writer.WaitForReaders(1, std::max<dds_duration_t>(timeout_ns - waited_ns, DDS_SECS(1)))) {
     if (why != nullptr) {
-      *why = "no hapco-server found in domain " + std::to_string(config_.domain) + " within " +
-             std::to_string(config_.connect_timeout_s) + " s (same domain id and CYCLONEDDS_URI peers?)";
+      char seconds[32];
+      std::snprintf(seconds, sizeof seconds, "%g", config_.connect_timeout_s);
+      *why = "no hapco-server found in domain " + std::to_string(config_.domain) + " within " + seconds +
+             " s (same domain id and CYCLONEDDS_URI peers?)";
     }
     return false;
   }
@@ -98,8 +117,10 @@ bool PhantomClient::Connect(std::string* why) {
   service::CheckReturn(dds_->session_writer.Write(*control), "SESSION_JOIN");
   if (!dds_->force_reader.WaitForWriters(1, timeout_ns)) {
     if (why != nullptr) {
-      *why = "the server did not open a session for '" + config_.client_id + "' within " +
-             std::to_string(config_.connect_timeout_s) + " s (server full, or it does not serve scene '" +
+      char seconds[32];
+      std::snprintf(seconds, sizeof seconds, "%g", config_.connect_timeout_s);
+      *why = "the server did not open a session for '" + config_.client_id + "' within " + seconds +
+             " s (server full, or it does not serve scene '" +
              config_.scene_name + "'? see its log)";
     }
     return false;

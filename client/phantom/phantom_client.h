@@ -97,8 +97,10 @@ class PhantomClient {
 
   // Waits for the server's readers, sends SESSION_JOIN and waits until the server's force
   // writer for this client matches, so the first pose already gets its force. False (with
-  // the reason in *why) if no server answers within connect_timeout_s.
-  bool Connect(std::string* why);
+  // the reason in *why) if no server answers within connect_timeout_s. `progress` (optional)
+  // gets a line after 0.5 s without a server, and again every 5 s, so a user waiting for a
+  // server that is not there is told so at once.
+  bool Connect(std::string* why, const std::function<void(const std::string&)>& progress = {});
 
   // Runs the servo loop: config.ticks poses, then up to drain_ticks ticks for forces in
   // flight; returns early when `stop` becomes true. `on_tick` (optional) sees every tick.
