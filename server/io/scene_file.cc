@@ -211,9 +211,9 @@ class SceneChecker {
   void CheckContact(const pb::Scene& scene, sim::SceneSpec* spec) const {
     const pb::Contact& contact = scene.contact();
     const auto* tree = Nested(tree_, scene, "contact");
-    if (!(contact.friction_coefficient() >= 0.0) || contact.friction_coefficient() > 10.0) {
+    if (!(contact.friction_coefficient() >= 0.0) || contact.friction_coefficient() > sim::kMaxFrictionCoefficient) {
       Fail("contact", contact, tree, "friction_coefficient",
-           "must be in [0, 10], got " + Number(contact.friction_coefficient()));
+           "must be in [0, " + Number(sim::kMaxFrictionCoefficient) + "], got " + Number(contact.friction_coefficient()));
     }
     if (!(contact.activation_gap_m() > 0.0) || !std::isfinite(contact.activation_gap_m())) {
       Fail("contact", contact, tree, "activation_gap_m",

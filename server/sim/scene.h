@@ -72,6 +72,8 @@ inline constexpr double kMaxBodyBuildBytes = 4.0 * 1024 * 1024 * 1024;
 // The largest trajectory a scene may describe (steps over all phases), so that step counts
 // stay far from int overflow and DeviceTrajectory() from exhausting memory.
 inline constexpr long long kMaxTrajectorySteps = 100'000'000;
+// Largest Coulomb coefficient a scene (and hapco-sim --mu) accepts, dimensionless.
+inline constexpr double kMaxFrictionCoefficient = 10.0;
 
 // Meshes the body's box, gathers its Dirichlet nodes and factors its stiffness (once).
 // Throws InputError, before allocating, when EstimateBodyBuild exceeds kMaxBodyBuildBytes.

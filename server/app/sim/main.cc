@@ -35,7 +35,9 @@ Runs the scene's trajectory (the paper's five phases) through the contact pipeli
 detection, flexibility operator, frictional contact solve, force on the device.
 
   --solver NAME     local-uzawa | global-uzawa-gs | global-uzawa-jacobi | reference
-                    (default: the scene's solver)
+                    (default: the scene's solver). global-uzawa-jacobi is the De Saxce fixed
+                    point for stability studies: with the paper's rho it does not converge on
+                    the shipped meshes (docs/contact-benchmark.md)
   --tol X           the paper's stop test ||dr||/rho < X, in m (default: the scene's)
   --mu X            Coulomb friction coefficient (default: the scene's)
   --max-iter N      outer iteration cap (default: the scene's)
@@ -95,7 +97,12 @@ Options Parse(int argc, char** argv) {
       if (options.tolerance_m <= 0) throw hapco::InputError("--tol must be > 0 m");
     } else if (arg == "--mu") {
       options.friction = hapco::cli::ParseDouble("--mu", value());
-      if (options.friction < 0) throw hapco::InputError("--mu must be >= 0");
+      if (!(options.friction >= 0) || options.friction > hapco::sim::kMaxFrictionCoefficient) {
+        char message[128];
+        std::snprintf(message, sizeof message, "--mu must be in [0, %g] as in a scene file, got %g",
+                      hapco::sim::kMaxFrictionCoefficient, options.friction);
+        throw hapco::InputError(message);
+      }
     } else if (arg == "--max-iter") {
       options.max_iterations = static_cast<int>(hapco::cli::ParseInteger("--max-iter", value(), 1, 100000000));
     } else if (arg == "--rho-scale") {
