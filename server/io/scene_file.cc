@@ -6,6 +6,8 @@
 #include <cmath>
 #include <fstream>
 #include <sstream>
+#include <string>
+#include <vector>
 
 #include "common/error.h"
 #include "scene.pb.h"
@@ -85,11 +87,19 @@ class SceneChecker {
     if (!scene.has_obstacle()) Fail("", scene, tree_, "obstacle", "is missing");
     if (!scene.has_tool()) Fail("", scene, tree_, "tool", "is missing");
     spec.obstacle = CheckBody("obstacle", scene.obstacle(), Nested(tree_, scene, "obstacle"));
-    spec.tool = CheckBody("tool", scene.tool(), Nested(tree_, scene, "tool"));
-    if (!spec.tool.driven_face) {
-      Fail("tool", scene.tool(), Nested(tree_, scene, "tool"), "driven_face",
-           "is missing: the tool must have a face that follows the haptic device");
+    // Before the body checks: without a driven face the tool would be reported as an
+    // unsupported body ("no clamped and no driven face"), which hides the actual mistake.
+    if (scene.tool().driven_face() == pb::BOX_FACE_UNSPECIFIED) {
+      std::string where = source_;
+      const FieldDescriptor* tool_field = scene.GetDescriptor()->FindFieldByName("tool");
+      if (tree_ != nullptr && tool_field != nullptr) {
+        const auto location = tree_->GetLocation(tool_field, -1);
+        if (location.line >= 0) where += ":" + std::to_string(location.line + 1);
+      }
+      throw InputError(where + ": tool.driven_face: is missing: the tool must have a face that follows the "
+                               "haptic device (e.g. `driven_face: Z_MAX` in the tool block)");
     }
+    spec.tool = CheckBody("tool", scene.tool(), Nested(tree_, scene, "tool"));
     CheckContact(scene, &spec);
     CheckSolver(scene, &spec);
     CheckTrajectory(scene, &spec);
@@ -307,6 +317,47 @@ class SceneChecker {
   const TextFormat::ParseInfoTree* tree_;
 };
 
+// Whether some message type reachable from `type` (other than `except`) has a field `name`.
+bool SomeMessageHasField(const google::protobuf::Descriptor* type, const std::string& name,
+                         const std::string& except, std::vector<const google::protobuf::Descriptor*>* seen,
+                         std::string* owner) {
+  for (const auto* visited : *seen) {
+    if (visited == type) return false;
+  }
+  seen->push_back(type);
+  if (type->full_name() != except && type->FindFieldByName(name) != nullptr) {
+    *owner = type->name();
+    return true;
+  }
+  for (int k = 0; k < type->field_count(); ++k) {
+    const FieldDescriptor* field = type->field(k);
+    if (field->message_type() != nullptr && SomeMessageHasField(field->message_type(), name, except, seen, owner)) {
+      return true;
+    }
+  }
+  return false;
+}
+
+// The parser reports a missing `}` as an unknown field of the block left open ("Message type
+// "hapco.scene.Material" has no field named "driven_face""); when the field belongs to another
+// block of the scene, say that a `}` is probably missing.
+std::string WithMissingBraceHint(const std::string& message) {
+  static const std::string kType = "Message type \"", kField = "\" has no field named \"";
+  const std::size_t type_at = message.find(kType);
+  const std::size_t field_at = message.find(kField);
+  if (type_at == std::string::npos || field_at == std::string::npos || field_at < type_at) return message;
+  const std::string type = message.substr(type_at + kType.size(), field_at - type_at - kType.size());
+  const std::size_t name_at = field_at + kField.size();
+  const std::size_t name_end = message.find('"', name_at);
+  if (name_end == std::string::npos) return message;
+  const std::string name = message.substr(name_at, name_end - name_at);
+  std::vector<const google::protobuf::Descriptor*> seen;
+  std::string owner;
+  if (!SomeMessageHasField(pb::Scene::descriptor(), name, type, &seen, &owner)) return message;
+  return message + " (is a `}` missing before this line? `" + name + "` is a field of " + owner + ", not of " +
+         type.substr(type.rfind('.') + 1) + ")";
+}
+
 }  // namespace
 
 sim::SceneSpec ParseSceneText(const std::string& text, const std::string& source_name) {
@@ -318,7 +369,7 @@ sim::SceneSpec ParseSceneText(const std::string& text, const std::string& source
   parser.WriteLocationsTo(&tree);
   if (!parser.ParseFromString(text, &scene)) {
     throw InputError(source_name + ":" +
-                     (errors.has_error() ? errors.message() : std::string(" syntax error")));
+                     (errors.has_error() ? WithMissingBraceHint(errors.message()) : std::string(" syntax error")));
   }
   return SceneChecker(source_name, &tree).Check(scene);
 }

@@ -105,6 +105,11 @@ Options ParseOptions(int argc, char** argv) {
       return options;
     }
     if (arg.starts_with("--")) {
+      static constexpr std::array<std::string_view, 6> kWithValue = {"--solver", "--tol", "--paper-tol",
+                                                                      "--local-tol", "--max-iter", "--out"};
+      if (std::find(kWithValue.begin(), kWithValue.end(), arg) == kWithValue.end()) {
+        throw hapco::InputError("unknown option " + std::string(arg) + " (see --help)");
+      }
       if (k + 1 >= argc) throw hapco::InputError(std::string(arg) + " needs a value");
       const std::string_view value = argv[++k];
       if (arg == "--solver") {

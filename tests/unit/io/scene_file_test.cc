@@ -152,6 +152,28 @@ TEST(SceneFileTest, ToolWithoutDrivenFaceIsRejected) {
   EXPECT_NE(message.find("tool.driven_face"), std::string::npos) << message;
 }
 
+// With no driven face and no clamped face the tool used to be reported as "tool.clamped_faces:
+// ... singular" without a line: the missing driven_face is named, at the tool block's line.
+TEST(SceneFileTest, ToolWithNeitherDrivenNorClampedFaceIsToldItNeedsADrivenFaceAtItsLine) {
+  const std::string message = ErrorOf(Benchmark1With("driven_face: Z_MAX", ""));
+  EXPECT_NE(message.find("tool.driven_face: is missing"), std::string::npos) << message;
+  EXPECT_NE(message.find("scene.txtpb:" + std::to_string(LineOf("tool {")) + ":"), std::string::npos) << message;
+  EXPECT_EQ(message.find("clamped_faces"), std::string::npos) << message;
+}
+
+// A missing `}` makes the next field land in the block left open; the parser's "Material has
+// no field named driven_face" now says that a `}` is probably missing.
+TEST(SceneFileTest, MissingClosingBraceIsNamedAsSuch) {
+  const std::string message = ErrorOf(Benchmark1With("youngs_modulus_pa: 8.0e7 poisson_ratio: 0.3 }",
+                                                     "youngs_modulus_pa: 8.0e7 poisson_ratio: 0.3"));
+  EXPECT_NE(message.find("is a `}` missing before this line? `driven_face` is a field of Body, not of Material"),
+            std::string::npos)
+      << message;
+  // A genuinely unknown field gets no such hint.
+  EXPECT_EQ(ErrorOf(Benchmark1With("force_gain: 0.25", "force_gain: 0.25\nforce_gian: 2")).find("missing"),
+            std::string::npos);
+}
+
 TEST(SceneFileTest, TrajectoryPhaseWithoutStepsIsRejected) {
   const std::string message = ErrorOf(Benchmark1With("steps: 50", "steps: 0"));
   EXPECT_NE(message.find("trajectory.phases[2].steps"), std::string::npos) << message;
