@@ -178,15 +178,26 @@ int Run(int argc, char** argv) {
     std::fprintf(csv, "step,client_id,time_ns,dx_m,dy_m,dz_m,fx_n,fy_n,fz_n,device_fx_n,device_fy_n,device_fz_n,"
                       "separating,sticking,sliding,iterations,solver_status,solve_s,step_s,round_trip_s,"
                       "pose_sequence,server_time_s,contacts_missing,contacts\n");
+    // Online recordings (hapco-recorder) carry the server's time per step but not the solve
+    // and step timings of an offline run: those cells are left empty (unknown), not 0.
+    const bool offline = std::any_of(records.begin(), records.end(), [](const auto& record) {
+      return record.has_header() && record.header().writer() == "hapco-sim";
+    });
+    auto seconds_or_empty = [offline](double seconds) {
+      char text[32] = "";
+      if (offline) std::snprintf(text, sizeof text, "%.6g", seconds);
+      return std::string(text);
+    };
     for (const auto* s : steps) {
-      std::fprintf(csv, "%llu,%s,%lld,%.9g,%.9g,%.9g,%.12g,%.12g,%.12g,%.12g,%.12g,%.12g,%u,%u,%u,%u,%s,%.6g,%.6g,%.6g,"
+      std::fprintf(csv, "%llu,%s,%lld,%.9g,%.9g,%.9g,%.12g,%.12g,%.12g,%.12g,%.12g,%.12g,%u,%u,%u,%u,%s,%s,%s,%.6g,"
                    "%llu,%.6g,%d,%d\n",
                    static_cast<unsigned long long>(s->step()), s->client_id().c_str(),
                    static_cast<long long>(s->time_ns()), s->device_translation_m().x(), s->device_translation_m().y(),
                    s->device_translation_m().z(), s->contact_force_n().x(), s->contact_force_n().y(),
                    s->contact_force_n().z(), s->device_force_n().x(), s->device_force_n().y(), s->device_force_n().z(),
                    s->separating(), s->sticking(), s->sliding(), s->iterations(), s->solver_status().c_str(),
-                   s->solve_s(), s->step_s(), s->round_trip_s(), static_cast<unsigned long long>(s->pose_sequence()),
+                   seconds_or_empty(s->solve_s()).c_str(), seconds_or_empty(s->step_s()).c_str(), s->round_trip_s(),
+                   static_cast<unsigned long long>(s->pose_sequence()),
                    s->server_time_s(), s->contacts_missing() ? 1 : 0, s->contacts_size());
     }
     std::fclose(csv);

@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstdint>
 #include <filesystem>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -174,6 +175,40 @@ TEST(RecorderProcess, RecordingHoldsExactlyTheServersSteps) {
                          std::to_string(from_forces) + " missing steps"),
             std::string::npos)
       << summary;
+
+  // hapco-report's CSV of an online recording: the server's time per step is known, the solve
+  // and step timings of an offline run are not recorded online, so they are empty, not 0.
+  Process report_process({HAPCO_REPORT_EXE, file, "--csv", dir + "/steps.csv"}, dir + "/report.out",
+                         dir + "/report.err");
+  ASSERT_EQ(report_process.Wait(60'000), 0) << ReadFile(dir + "/report.err");
+  std::istringstream csv(ReadFile(dir + "/steps.csv"));
+  std::string line;
+  ASSERT_TRUE(std::getline(csv, line));
+  auto column_of = [&](const std::string& name) {
+    std::istringstream header(line);
+    std::string cell;
+    for (int k = 0; std::getline(header, cell, ','); ++k) {
+      if (cell == name) return k;
+    }
+    return -1;
+  };
+  const int solve_column = column_of("solve_s"), step_column = column_of("step_s"),
+            server_column = column_of("server_time_s");
+  ASSERT_GE(solve_column, 0);
+  ASSERT_GE(step_column, 0);
+  ASSERT_GE(server_column, 0);
+  std::size_t rows = 0;
+  while (std::getline(csv, line)) {
+    std::vector<std::string> cells;
+    std::istringstream row(line);
+    for (std::string cell; std::getline(row, cell, ',');) cells.push_back(cell);
+    ASSERT_GT(cells.size(), static_cast<std::size_t>(server_column)) << line;
+    EXPECT_EQ(cells[static_cast<std::size_t>(solve_column)], "") << line;
+    EXPECT_EQ(cells[static_cast<std::size_t>(step_column)], "") << line;
+    EXPECT_GT(std::stod(cells[static_cast<std::size_t>(server_column)]), 0.0) << line;
+    ++rows;
+  }
+  EXPECT_EQ(rows, steps.size());
 }
 
 // (b) A recorder killed with SIGKILL mid-run: the file reads, every record up to the last
