@@ -588,5 +588,5 @@ int Run(const Options& o) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  return hapco::cli::RunMain("hapco-loadtest", [&] { return Run(Parse(argc, argv)); });
+  return hapco::cli::RunMain("hapco-loadtest", argc, argv, [&] { return Run(Parse(argc, argv)); });
 }

@@ -205,5 +205,5 @@ int Run(const Options& o) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  return hapco::cli::RunMain("hapco-phantom", [&] { return Run(Parse(argc, argv)); });
+  return hapco::cli::RunMain("hapco-phantom", argc, argv, [&] { return Run(Parse(argc, argv)); });
 }

@@ -420,5 +420,5 @@ int Run(const Options& o) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  return hapco::cli::RunMain("hapco-recorder", [&] { return Run(Parse(argc, argv)); });
+  return hapco::cli::RunMain("hapco-recorder", argc, argv, [&] { return Run(Parse(argc, argv)); });
 }

@@ -1,5 +1,7 @@
 #include "common/cli.h"
 
+#include "common/version.h"
+
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -44,6 +46,25 @@ int RunMain(const char* tool, const std::function<int()>& body) {
     std::fprintf(stderr, "%s: unexpected error: %s\n", tool, error.what());
     return 3;
   }
+}
+
+int RunMain(const char* tool, int argc, char** argv, const std::function<int()>& body) {
+  if (AsksForVersion(argc, argv)) {
+    std::printf("%s\n", VersionLine(tool).c_str());
+    return 0;
+  }
+  return RunMain(tool, body);
+}
+
+std::string VersionLine(std::string_view tool) {
+  return std::string(tool) + " HapCo " + HAPCO_VERSION_STRING + " (git " + HAPCO_GIT_DESCRIBE + ")";
+}
+
+bool AsksForVersion(int argc, char** argv) {
+  for (int k = 1; k < argc; ++k) {
+    if (std::string_view(argv[k]) == "--version") return true;
+  }
+  return false;
 }
 
 }  // namespace hapco::cli

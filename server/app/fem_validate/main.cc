@@ -11,6 +11,7 @@
 
 #include <Eigen/Core>
 
+#include "common/cli.h"
 #include "common/error.h"
 #include "common/timer.h"
 #include "fem/assembly.h"
@@ -191,6 +192,10 @@ int Run(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  if (hapco::cli::AsksForVersion(argc, argv)) {
+    std::printf("%s\n", hapco::cli::VersionLine("hapco-fem-validate").c_str());
+    return 0;
+  }
   try {
     return Run(argc, argv);
   } catch (const std::exception& e) {

@@ -368,5 +368,5 @@ int Run(const Options& o) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  return hapco::cli::RunMain("hapco-netdelay", [&] { return Run(ParseArgs(argc, argv)); });
+  return hapco::cli::RunMain("hapco-netdelay", argc, argv, [&] { return Run(ParseArgs(argc, argv)); });
 }

@@ -219,5 +219,5 @@ int Run(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  return hapco::cli::RunMain("hapco-report", [&] { return Run(argc, argv); });
+  return hapco::cli::RunMain("hapco-report", argc, argv, [&] { return Run(argc, argv); });
 }

@@ -149,5 +149,5 @@ int Run(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  return hapco::cli::RunMain("hapco-scene", [&] { return Run(argc, argv); });
+  return hapco::cli::RunMain("hapco-scene", argc, argv, [&] { return Run(argc, argv); });
 }

@@ -197,5 +197,5 @@ int Run(const Options& options) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  return hapco::cli::RunMain("hapco-server", [&] { return Run(Parse(argc, argv)); });
+  return hapco::cli::RunMain("hapco-server", argc, argv, [&] { return Run(Parse(argc, argv)); });
 }

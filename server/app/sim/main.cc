@@ -436,5 +436,5 @@ int Run(const Options& options) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  return hapco::cli::RunMain("hapco-sim", [&] { return Run(Parse(argc, argv)); });
+  return hapco::cli::RunMain("hapco-sim", argc, argv, [&] { return Run(Parse(argc, argv)); });
 }

@@ -12,6 +12,7 @@
 #include <string_view>
 #include <system_error>
 
+#include "common/cli.h"
 #include "common/error.h"
 #include "common/memory.h"
 #include "contact/global_problem.h"
@@ -317,6 +318,10 @@ int Run(const Options& options) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  if (hapco::cli::AsksForVersion(argc, argv)) {
+    std::printf("%s\n", hapco::cli::VersionLine("hapco-solve").c_str());
+    return kExitConverged;
+  }
   try {
     const Options options = ParseOptions(argc, argv);
     if (options.help) {

@@ -111,5 +111,5 @@ int Run(const Options& o) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  return hapco::cli::RunMain("hapco-status", [&] { return Run(Parse(argc, argv)); });
+  return hapco::cli::RunMain("hapco-status", argc, argv, [&] { return Run(Parse(argc, argv)); });
 }
