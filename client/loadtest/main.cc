@@ -59,6 +59,7 @@ server's step times and CPU use (ServerStatus). Definitions: docs/load-and-netwo
   --connect-timeout-s S  wait at most S s for the server (default 30)
   --quiet             no progress line
   --help              this text
+  --version           the HapCo version and git revision, then exit
 
 Progress on stderr about once a second: elapsed time, clients running, forces/s received,
 missed ticks in the last second, the server's sessions, step p99 and CPU (latest status).

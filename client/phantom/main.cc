@@ -48,6 +48,7 @@ A simulated haptic device that drives a hapco-server session at 1 kHz.
   --rt-priority N     SCHED_FIFO priority 1..99 for the tick (needs CAP_SYS_NICE; default 0)
   --connect-timeout-s S  wait at most S s for the server (default 30)
   --help              this text
+  --version           the HapCo version and git revision, then exit
 
 Safety (every tick): a NaN/Inf force is never rendered (the last good one is kept), the
 magnitude is clamped to 7.9 N, the change per tick is limited to 0.25 N (250 N/s).

@@ -47,6 +47,7 @@ checksummed and flushed record by record). Read it with hapco-report. docs/recor
   --duration S      stop after S seconds (default: run until SIGINT/SIGTERM)
   --quiet           no progress line (the exit summary is still printed)
   --help            this text
+  --version         the HapCo version and git revision, then exit
 
 Steps come from the contact-state frames; a force whose frame never arrived becomes a step
 with contacts_missing set. Gaps in a client's server step counter are counted as missing

@@ -39,6 +39,7 @@ for Tet4 and Tet10 over a sequence of nested box meshes.
   --case ORDER:NXxNYxNZ
                run this mesh instead of the default sequence (repeatable), e.g. Tet10:12x3x3
   --help       this text
+  --version    the HapCo version and git revision, then exit
 )";
 
 double BeamTheoryDeflection() {

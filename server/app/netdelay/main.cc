@@ -63,6 +63,7 @@ the rest when their time is up. Route packets to it with e.g.
   --rt-priority N      SCHED_FIFO priority 1..99 for tighter release times (default 0)
   --quiet              no start line
   --help               this text
+  --version            the HapCo version and git revision, then exit
 
 Prints "hapco-netdelay: ready" on stderr once the queue is bound. SIGINT/SIGTERM: accepts
 every held packet at once, prints a summary (packets, dropped, added delay measured from

@@ -29,6 +29,7 @@ round-trip histogram (online recordings).
   --plots DIR    write force.png, contact_states.png, round_trip.png to DIR (needs
                  /usr/bin/python3 with matplotlib; implies a CSV at DIR/steps.csv)
   --help         this text
+  --version      the HapCo version and git revision, then exit
 
 Exit code: 0 on success, 1 on a missing/unreadable file or a file that is not a recording.
 )";

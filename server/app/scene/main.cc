@@ -28,6 +28,7 @@ the tool's unit fields) and prints sizes, costs, memory and sanity checks.
 
   --no-compliance   stop after the factorisations (faster on very fine meshes)
   --help            this text
+  --version         the HapCo version and git revision, then exit
 
 Exit code: 0 on success, 1 on a bad scene (one line on stderr names file, line and field).
 )";

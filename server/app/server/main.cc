@@ -59,6 +59,7 @@ Guide: docs/haptic-service.md.
                       (1..99; needs CAP_SYS_NICE; default 0 = normal policy)
   --quiet             no log lines (the exit summary is still printed)
   --help              this text
+  --version           the HapCo version and git revision, then exit
 
 SIGINT/SIGTERM: clean shutdown, exit code 0 and a one-line summary.
 Exit code: 0 after a clean shutdown, 1 on bad input (scene file, flags), 3 on a DDS failure.

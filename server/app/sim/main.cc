@@ -66,6 +66,7 @@ detection, flexibility operator, frictional contact solve, force on the device.
   --fclib-every N   FCLIB export period in steps (default 10)
   --quiet           no progress line
   --help            this text
+  --version         the HapCo version and git revision, then exit
 
 Exit code: 0 when every step converged, 2 when some did not (the run completes), 1 on bad input.
 )";

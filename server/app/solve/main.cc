@@ -58,6 +58,7 @@ cone complementarity of u = H^T v + w) is computed from M, H, f, w directly.
                     solution in its FCLIB /solution group: r, u (and v for a global
                     problem); also when not converged
   --help            this text
+  --version         the HapCo version and git revision, then exit
 
 If PROBLEM.hdf5 already holds a /solution, its fc3d error is printed too.
 

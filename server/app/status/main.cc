@@ -27,6 +27,7 @@ Waits for a hapco-server's ServerStatus (topic "hapco/status"), prints it, exits
   --server-id ID      accept only the server with this id (default: any)
   --quiet             print nothing on success
   --help              this text
+  --version           the HapCo version and git revision, then exit
 
 Exit code: 0 status received, 1 none in time (or bad flags), 3 DDS failure.
 )";
