@@ -20,6 +20,14 @@ bool AllFinite(const Eigen::SparseMatrix<double>& a) {
 
 }  // namespace
 
+double SparseRelativeAsymmetry(const Eigen::SparseMatrix<double>& m) {
+  if (m.nonZeros() == 0) return 0.0;
+  const double scale = m.coeffs().cwiseAbs().maxCoeff();
+  if (!(scale > 0.0)) return 0.0;
+  const Eigen::SparseMatrix<double> skew = m - Eigen::SparseMatrix<double>(m.transpose());
+  return skew.nonZeros() > 0 ? skew.coeffs().cwiseAbs().maxCoeff() / scale : 0.0;
+}
+
 void ValidateGlobalProblem(const GlobalContactProblem& p) {
   std::ostringstream msg;
   const Eigen::Index n = p.m.rows();
@@ -64,10 +72,7 @@ void ValidateGlobalProblem(const GlobalContactProblem& p) {
       fail();
     }
   }
-  const Eigen::SparseMatrix<double> transposed = p.m.transpose();
-  const double scale = p.m.coeffs().cwiseAbs().maxCoeff();  // > 0: the diagonal is positive
-  const Eigen::SparseMatrix<double> skew = p.m - transposed;
-  const double asymmetry = skew.nonZeros() > 0 ? skew.coeffs().cwiseAbs().maxCoeff() / scale : 0.0;
+  const double asymmetry = SparseRelativeAsymmetry(p.m);
   if (asymmetry > kMaxMassRelativeAsymmetry) {
     msg << "M is not symmetric: max|M - M^T| / max|M| = " << asymmetry << " (round-off is accepted up to "
         << kMaxMassRelativeAsymmetry << "; was only one triangle stored?)";

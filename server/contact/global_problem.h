@@ -31,6 +31,9 @@ struct GlobalContactProblem {
 // kMaxRelativeAsymmetry for the argument). The Delassus operator uses (M + Mᵀ)/2.
 inline constexpr double kMaxMassRelativeAsymmetry = 1e-4;
 
+// max|M − Mᵀ| / max|M| of a square sparse matrix (0 for M = 0), dimensionless.
+double SparseRelativeAsymmetry(const Eigen::SparseMatrix<double>& m);
+
 // Throws hapco::InputError naming the first inconsistency: sizes (M n×n, H n×3n_c, f n, w 3n_c,
 // μ n_c, n_c ≥ 1), non-finite entries, μ < 0, an asymmetric M beyond the tolerance above, or a
 // non-positive diagonal entry of M. Positive definiteness is checked by the factorization.

@@ -14,6 +14,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
+#include <functional>
 #include <memory>
 #include <new>
 #include <sstream>
@@ -282,6 +283,59 @@ struct LocalLayout {
   std::size_t title_size = 0, description_size = 0, math_info_size = 0;
 };
 
+struct MatrixLayout {
+  int m = 0, n = 0, nz = 0, nzmax = 0;
+  long x_points = 0;
+};
+
+// The datasets fclib's read_matrix reads from `group` (nzmax, m, n, nz, p, i, x and the
+// optional conditioning/determinant/rank/comment), checked with the sizes its buffers get.
+// `check_shape(m, n)` (throws) runs once m and n are known, before any array is read.
+MatrixLayout CheckMatrixGroup(hid_t file, const std::string& path, const std::string& group,
+                              const std::function<void(int, int)>& check_shape) {
+  RequireGroup(file, path, group);
+  MatrixLayout layout;
+  layout.nzmax = ReadInt(file, path, group + "/nzmax");
+  layout.m = ReadInt(file, path, group + "/m");
+  layout.n = ReadInt(file, path, group + "/n");
+  layout.nz = ReadInt(file, path, group + "/nz");
+  const int m = layout.m, n = layout.n, nz = layout.nz, nzmax = layout.nzmax;
+  check_shape(m, n);
+  std::ostringstream msg;
+  if (m <= 0 || n <= 0) {
+    msg << group << " is " << m << "x" << n << "; both sizes must be positive";
+    Fail(path, msg.str());
+  }
+  if (nz < -2) {
+    Fail(path, group + "/nz is " + std::to_string(nz) +
+                   "; expected -1 (compressed columns), -2 (compressed rows) or >= 0 (triplet)");
+  }
+  if (nzmax < 0) Fail(path, group + "/nzmax is negative");
+  if (nz > nzmax) {
+    Fail(path, group + "/nz = " + std::to_string(nz) + " exceeds nzmax = " + std::to_string(nzmax));
+  }
+  const long mn = static_cast<long>(m) * n;
+  if (nzmax > mn) {
+    msg << group << " declares nzmax = " << nzmax << " for a " << m << "x" << n << " matrix (at most " << mn
+        << " entries)";
+    Fail(path, msg.str());
+  }
+  const long p_expected = nz >= 0 ? nz : (nz == -1 ? static_cast<long>(n) + 1 : static_cast<long>(m) + 1);
+  const long i_expected = nz >= 0 ? nz : nzmax;
+  RequireIntegers(file, path, group + "/p", p_expected, p_expected);
+  RequireIntegers(file, path, group + "/i", i_expected, i_expected);
+  const long used = nz >= 0 ? nz : nzmax;
+  if (used == 0) Fail(path, group + " stores no entries");
+  layout.x_points = RequireNumbers(file, path, group + "/x", used, nzmax).points;
+  if (ListedInGroup(file, path, group, "conditioning")) {
+    RequireNumbers(file, path, group + "/conditioning", 1);
+    RequireNumbers(file, path, group + "/determinant", 1);
+    RequireIntegers(file, path, group + "/rank", 1, 1);
+    if (ListedInGroup(file, path, group, "comment")) RequireOptionalString(file, path, group, "comment");
+  }
+  return layout;
+}
+
 // Checks everything fclib_read_local / fclib_read_solution will read, with the sizes their
 // buffers get (libfclib sizes each buffer from m, n, nz, nzmax and reads whole datasets).
 LocalLayout CheckLocalLayout(hid_t file, const std::string& path) {
@@ -302,62 +356,27 @@ LocalLayout CheckLocalLayout(hid_t file, const std::string& path) {
     Fail(path, "has V and R (a mixed problem with equality constraints); only plain local "
                "problems (W, q, mu) are supported");
   }
-  RequireGroup(file, path, "/fclib_local/W");
-  LocalLayout layout;
-  layout.nzmax = ReadInt(file, path, "/fclib_local/W/nzmax");
-  layout.m = ReadInt(file, path, "/fclib_local/W/m");
-  layout.n = ReadInt(file, path, "/fclib_local/W/n");
-  layout.nz = ReadInt(file, path, "/fclib_local/W/nz");
-  const int m = layout.m, n = layout.n, nz = layout.nz, nzmax = layout.nzmax;
-  std::ostringstream msg;
-  if (m != n) {
-    msg << "W is " << m << "x" << n << "; it must be square (3m x 3m for m contacts)";
-    Fail(path, msg.str());
-  }
-  if (m <= 0) Fail(path, "W has " + std::to_string(m) + " rows: the problem has no contacts");
-  if (m % 3 != 0) {
-    Fail(path, "W has " + std::to_string(m) + " rows, not a multiple of 3 (spacedim 3)");
-  }
-  if (m / 3 > kMaxContacts) {
-    msg << "has " << m / 3 << " contacts; at most " << kMaxContacts
-        << " are supported (W is stored dense)";
-    Fail(path, msg.str());
-  }
-  if (nz < -2) {
-    Fail(path, "W/nz is " + std::to_string(nz) +
-                   "; expected -1 (compressed columns), -2 (compressed rows) or >= 0 (triplet)");
-  }
-  if (nzmax < 0) Fail(path, "W/nzmax is negative");
-  if (nz > nzmax) {
-    Fail(path, "W/nz = " + std::to_string(nz) + " exceeds W/nzmax = " + std::to_string(nzmax));
-  }
-  // Bound the sizes before anything is allocated (a corrupt file can declare anything):
-  // more than n^2 stored entries is not a sane W.
-  const long nn = static_cast<long>(n) * n;
-  if (nzmax > nn || nz > nn) {
-    msg << "W declares nz = " << nz << ", nzmax = " << nzmax << " for a " << n << "x" << n
-        << " matrix (at most " << nn << " entries)";
-    Fail(path, msg.str());
-  }
-  const long p_expected = nz >= 0 ? nz : static_cast<long>(n) + 1;  // n == m
-  const long i_expected = nz >= 0 ? nz : nzmax;
-  RequireIntegers(file, path, "/fclib_local/W/p", p_expected, p_expected);
-  RequireIntegers(file, path, "/fclib_local/W/i", i_expected, i_expected);
-  // libfclib reads all of x into nzmax doubles: more would overflow; fewer than the entries
-  // in use (nz for triplets, nzmax otherwise) would leave values uninitialised.
-  const long used = nz >= 0 ? nz : nzmax;
-  if (used == 0) Fail(path, "W stores no entries");
-  const DatasetShape x = RequireNumbers(file, path, "/fclib_local/W/x", used, nzmax);
-  layout.x_points = x.points;
-  // Optional matrix info, read by libfclib when "conditioning" is present.
-  if (ListedInGroup(file, path, "/fclib_local/W", "conditioning")) {
-    RequireNumbers(file, path, "/fclib_local/W/conditioning", 1);
-    RequireNumbers(file, path, "/fclib_local/W/determinant", 1);
-    RequireIntegers(file, path, "/fclib_local/W/rank", 1, 1);
-    if (ListedInGroup(file, path, "/fclib_local/W", "comment")) {
-      RequireOptionalString(file, path, "/fclib_local/W", "comment");
+  // W's shape is checked before any of its arrays is read (a corrupt file can declare anything).
+  const MatrixLayout w = CheckMatrixGroup(file, path, "/fclib_local/W", [&](int m, int n) {
+    std::ostringstream msg;
+    if (m != n) {
+      msg << "W is " << m << "x" << n << "; it must be square (3m x 3m for m contacts)";
+      Fail(path, msg.str());
     }
-  }
+    if (m <= 0) Fail(path, "W has " + std::to_string(m) + " rows: the problem has no contacts");
+    if (m % 3 != 0) Fail(path, "W has " + std::to_string(m) + " rows, not a multiple of 3 (spacedim 3)");
+    if (m / 3 > kMaxContacts) {
+      msg << "has " << m / 3 << " contacts; at most " << kMaxContacts << " are supported (W is stored dense)";
+      Fail(path, msg.str());
+    }
+  });
+  LocalLayout layout;
+  layout.m = w.m;
+  layout.n = w.n;
+  layout.nz = w.nz;
+  layout.nzmax = w.nzmax;
+  layout.x_points = w.x_points;
+  const int m = layout.m;
   RequireGroup(file, path, "/fclib_local/vectors");
   RequireNumbers(file, path, "/fclib_local/vectors/q", m);
   RequireNumbers(file, path, "/fclib_local/vectors/mu", m / 3);
@@ -529,56 +548,6 @@ class LocalView {
 
 // --- Global problems: the same checks, for /fclib_global ---
 
-struct MatrixLayout {
-  int m = 0, n = 0, nz = 0, nzmax = 0;
-  long x_points = 0;
-};
-
-// The datasets fclib's read_matrix reads from `group` (nzmax, m, n, nz, p, i, x and the
-// optional conditioning/determinant/rank/comment), checked with the sizes its buffers get.
-MatrixLayout CheckMatrixGroup(hid_t file, const std::string& path, const std::string& group) {
-  RequireGroup(file, path, group);
-  MatrixLayout layout;
-  layout.nzmax = ReadInt(file, path, group + "/nzmax");
-  layout.m = ReadInt(file, path, group + "/m");
-  layout.n = ReadInt(file, path, group + "/n");
-  layout.nz = ReadInt(file, path, group + "/nz");
-  const int m = layout.m, n = layout.n, nz = layout.nz, nzmax = layout.nzmax;
-  std::ostringstream msg;
-  if (m <= 0 || n <= 0) {
-    msg << group << " is " << m << "x" << n << "; both sizes must be positive";
-    Fail(path, msg.str());
-  }
-  if (nz < -2) {
-    Fail(path, group + "/nz is " + std::to_string(nz) +
-                   "; expected -1 (compressed columns), -2 (compressed rows) or >= 0 (triplet)");
-  }
-  if (nzmax < 0) Fail(path, group + "/nzmax is negative");
-  if (nz > nzmax) {
-    Fail(path, group + "/nz = " + std::to_string(nz) + " exceeds nzmax = " + std::to_string(nzmax));
-  }
-  const long mn = static_cast<long>(m) * n;
-  if (nzmax > mn) {
-    msg << group << " declares nzmax = " << nzmax << " for a " << m << "x" << n << " matrix (at most " << mn
-        << " entries)";
-    Fail(path, msg.str());
-  }
-  const long p_expected = nz >= 0 ? nz : (nz == -1 ? static_cast<long>(n) + 1 : static_cast<long>(m) + 1);
-  const long i_expected = nz >= 0 ? nz : nzmax;
-  RequireIntegers(file, path, group + "/p", p_expected, p_expected);
-  RequireIntegers(file, path, group + "/i", i_expected, i_expected);
-  const long used = nz >= 0 ? nz : nzmax;
-  if (used == 0) Fail(path, group + " stores no entries");
-  layout.x_points = RequireNumbers(file, path, group + "/x", used, nzmax).points;
-  if (ListedInGroup(file, path, group, "conditioning")) {
-    RequireNumbers(file, path, group + "/conditioning", 1);
-    RequireNumbers(file, path, group + "/determinant", 1);
-    RequireIntegers(file, path, group + "/rank", 1, 1);
-    if (ListedInGroup(file, path, group, "comment")) RequireOptionalString(file, path, group, "comment");
-  }
-  return layout;
-}
-
 struct GlobalLayout {
   MatrixLayout m, h;
   std::size_t title_size = 0, description_size = 0, math_info_size = 0;
@@ -604,24 +573,22 @@ GlobalLayout CheckGlobalLayout(hid_t file, const std::string& path) {
                "HapCo solves global problems without them (M v = H r + f, u = H^T v + w)");
   }
   GlobalLayout layout;
-  layout.m = CheckMatrixGroup(file, path, "/fclib_global/M");
-  if (layout.m.m != layout.m.n) {
-    Fail(path, "M is " + std::to_string(layout.m.m) + "x" + std::to_string(layout.m.n) + "; it must be square");
-  }
-  layout.h = CheckMatrixGroup(file, path, "/fclib_global/H");
-  std::ostringstream msg;
-  if (layout.h.m != layout.m.n) {
-    msg << "H has " << layout.h.m << " rows but M has " << layout.m.n << " (H is dofs x 3 contacts)";
-    Fail(path, msg.str());
-  }
-  if (layout.h.n % 3 != 0) {
-    Fail(path, "H has " + std::to_string(layout.h.n) + " columns, not a multiple of 3 (spacedim 3)");
-  }
-  if (layout.h.n / 3 > kMaxContacts) {
-    msg << "has " << layout.h.n / 3 << " contacts; at most " << kMaxContacts
-        << " are supported (the Delassus operator W is formed dense)";
-    Fail(path, msg.str());
-  }
+  layout.m = CheckMatrixGroup(file, path, "/fclib_global/M", [&](int m, int n) {
+    if (m != n) Fail(path, "M is " + std::to_string(m) + "x" + std::to_string(n) + "; it must be square");
+  });
+  layout.h = CheckMatrixGroup(file, path, "/fclib_global/H", [&](int m, int n) {
+    std::ostringstream msg;
+    if (m != layout.m.n) {
+      msg << "H has " << m << " rows but M has " << layout.m.n << " (H is dofs x 3 contacts)";
+      Fail(path, msg.str());
+    }
+    if (n % 3 != 0) Fail(path, "H has " + std::to_string(n) + " columns, not a multiple of 3 (spacedim 3)");
+    if (n / 3 > kMaxContacts) {
+      msg << "has " << n / 3 << " contacts; at most " << kMaxContacts
+          << " are supported (the Delassus operator W is formed dense)";
+      Fail(path, msg.str());
+    }
+  });
   RequireGroup(file, path, "/fclib_global/vectors");
   RequireNumbers(file, path, "/fclib_global/vectors/f", layout.m.m);
   RequireNumbers(file, path, "/fclib_global/vectors/w", layout.h.n);
@@ -1115,9 +1082,7 @@ contact::GlobalContactProblem ReadFclibGlobalProblem(const std::string& path, Fc
     details->h_triplet_reading = h_reading;
     details->m_stored_entries = StoredEntries(*global->M);
     details->h_stored_entries = StoredEntries(*global->H);
-    const Eigen::SparseMatrix<double> skew = problem.m - Eigen::SparseMatrix<double>(problem.m.transpose());
-    details->m_relative_asymmetry =
-        skew.nonZeros() > 0 ? skew.coeffs().cwiseAbs().maxCoeff() / problem.m.coeffs().cwiseAbs().maxCoeff() : 0.0;
+    details->m_relative_asymmetry = contact::SparseRelativeAsymmetry(problem.m);
     details->info = FclibInfo{};
     if (global->info != nullptr) {
       details->info.title = CopyString(global->info->title, layout.title_size);

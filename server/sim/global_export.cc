@@ -97,9 +97,8 @@ StepGlobalProblem GlobalProblemOfStep(const TwoBodySession& session) {
   out.problem.mu = local.friction_coefficient;
 
   // A rigid-against-rigid contact got an extra compliance that M and H cannot reproduce.
-  const Eigen::VectorXd h_column_norms = Eigen::MatrixXd(out.problem.h).colwise().squaredNorm().transpose();
   for (int i = 0; i < 3 * m; ++i) {
-    if (h_column_norms(i) == 0.0) {
+    if (out.problem.h.col(i).squaredNorm() == 0.0) {  // column-major: one column's entries
       throw InputError("contact " + std::to_string(i / 3) +
                        " joins two Dirichlet nodes (rigid against rigid): no global problem reproduces it");
     }
