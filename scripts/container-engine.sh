@@ -8,9 +8,10 @@ docker_cli=$(command -v docker 2>/dev/null || true)
 if [[ -x /usr/bin/docker ]] && dpkg -S /usr/bin/docker >/dev/null 2>&1; then docker_cli=/usr/bin/docker; fi
 docker() { DOCKER_BUILDKIT=1 "$docker_cli" "$@"; }
 dockerd_pid=""
-dockerd_log=$(mktemp "${TMPDIR:-/tmp}/hapco-dockerd.XXXXXX.log")
+dockerd_log=""  # made by start_dockerd
 start_dockerd() {  # a dockerd of our own when none answers (root, no systemd); stopped at exit
   [[ -n $docker_cli ]] && command -v dockerd >/dev/null 2>&1 && [[ $(id -u) == 0 ]] || return 1
+  dockerd_log=$(mktemp "${TMPDIR:-/tmp}/hapco-dockerd.XXXXXX.log")
   log "no Docker engine answers: starting dockerd (log: $dockerd_log)"
   dockerd >"$dockerd_log" 2>&1 &
   dockerd_pid=$!
