@@ -17,7 +17,27 @@ timespec ToTimespec(int64_t ns) {
   return timespec{static_cast<time_t>(ns / 1'000'000'000LL), static_cast<long>(ns % 1'000'000'000LL)};
 }
 
+ServerVerdict FromIdl(hapco_idl_PoseVerdict verdict) {
+  switch (verdict) {
+    case hapco_idl_POSE_STEPPED: return ServerVerdict::kStepped;
+    case hapco_idl_POSE_IGNORED_NOT_FINITE: return ServerVerdict::kNotFinite;
+    case hapco_idl_POSE_IGNORED_OUT_OF_WORKSPACE: return ServerVerdict::kOutOfWorkspace;
+    case hapco_idl_POSE_IGNORED_JUMP: return ServerVerdict::kJump;
+  }
+  return ServerVerdict::kNotFinite;  // an unknown value: not a force to render
+}
+
 }  // namespace
+
+const char* ServerVerdictText(ServerVerdict verdict) {
+  switch (verdict) {
+    case ServerVerdict::kStepped: return "stepped";
+    case ServerVerdict::kNotFinite: return "NaN or Inf in the pose";
+    case ServerVerdict::kOutOfWorkspace: return "position outside the server's workspace (--workspace-m)";
+    case ServerVerdict::kJump: return "position jump above the server's limit (--max-jump-m)";
+  }
+  return "unknown";
+}
 
 struct PhantomClient::Dds {
   explicit Dds(const ClientConfig& c)
@@ -78,6 +98,8 @@ void PhantomClient::OnForcesAvailable() {
     r.separating = force.separating_count;
     r.sticking = force.sticking_count;
     r.sliding = force.sliding_count;
+    r.verdict = FromIdl(force.pose_verdict);
+    r.server_ignored_poses = force.ignored_poses;
     arrivals_head_.store(head + 1, std::memory_order_release);
   }
 }
@@ -154,6 +176,7 @@ void PhantomClient::Run(const std::atomic<bool>& stop, const std::function<void(
   taken.reserve(kArrivalCapacity);
   uint64_t last_force_sequence = 0;
   bool any_force = false, was_stale = false;
+  double last_notice_log_s = -1;  // when the last "server ignores poses" line was logged
   Eigen::Vector3d rendered = Eigen::Vector3d::Zero();
   Eigen::Vector3d previous_position = trajectory[0];
   const int64_t start_ns = MonotonicNowNs();
@@ -215,6 +238,21 @@ void PhantomClient::Run(const std::atomic<bool>& stop, const std::function<void(
          tail != arrivals_head_.load(std::memory_order_acquire); ++tail) {
       const ReceivedForce r = arrivals_[tail % kArrivalCapacity];
       arrivals_tail_.store(tail + 1, std::memory_order_release);
+      if (r.verdict != ServerVerdict::kStepped) {
+        // The server ignored a pose: no new force (the safety filter's timeout still applies),
+        // but the user hears why, at most once a second.
+        ++stats_.ignored_notices;
+        stats_.server_ignored_poses = r.server_ignored_poses;
+        if (log && (last_notice_log_s < 0 || now_s - last_notice_log_s >= 1.0)) {
+          last_notice_log_s = now_s;
+          char line[200];
+          std::snprintf(line, sizeof(line), "t=%.3f s: the server ignores this device's poses: %s (%llu so far)", now_s,
+                        ServerVerdictText(r.verdict), static_cast<unsigned long long>(r.server_ignored_poses));
+          log(line);
+        }
+        continue;
+      }
+      stats_.server_ignored_poses = r.server_ignored_poses;
       if (any_force && r.pose_sequence <= last_force_sequence) {
         ++stats_.forces_reordered;
         continue;

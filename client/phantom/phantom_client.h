@@ -44,6 +44,11 @@ struct ClientConfig {
   int drain_ticks = 50;
 };
 
+// Why the server did not step a pose (FeedbackForce.pose_verdict): kStepped for a force.
+enum class ServerVerdict { kStepped, kNotFinite, kOutOfWorkspace, kJump };
+// "position jump above the server's limit" and the like, for a user.
+const char* ServerVerdictText(ServerVerdict verdict);
+
 // A force sample as it arrived (stamped on Cyclone's receive thread).
 struct ReceivedForce {
   uint64_t pose_sequence = 0;
@@ -52,6 +57,10 @@ struct ReceivedForce {
   int64_t server_time_ns = 0;    // server: pose received -> force sent
   Eigen::Vector3d force_n = Eigen::Vector3d::Zero();  // as received (may be non-finite)
   uint32_t separating = 0, sticking = 0, sliding = 0;
+  // kStepped: a force. Otherwise a notice that the server ignored the pose (its force_n is
+  // the last force sent): not a new force, never rendered as one.
+  ServerVerdict verdict = ServerVerdict::kStepped;
+  uint64_t server_ignored_poses = 0;  // the server's count of this session's ignored poses
   double round_trip_us() const { return static_cast<double>(arrival_ns - client_time_ns) * 1e-3; }
 };
 
@@ -80,6 +89,8 @@ struct ClientStats {
   uint64_t stale_ticks = 0, rejected_non_finite = 0, clamped = 0;
   uint64_t server_losses = 0;       // times the force timeout engaged (ramp to zero)
   uint64_t resumptions = 0;         // times forces came back after a timeout
+  uint64_t ignored_notices = 0;     // notices "the server ignored pose N" received
+  uint64_t server_ignored_poses = 0;  // the server's count in the newest sample
   double peak_rendered_n = 0;
   std::vector<double> round_trip_us;       // pose sampled -> force arrived
   std::vector<double> render_latency_us;   // pose sampled -> the tick that renders it
@@ -104,7 +115,8 @@ class PhantomClient {
 
   // Runs the servo loop: config.ticks poses, then up to drain_ticks ticks for forces in
   // flight; returns early when `stop` becomes true. `on_tick` (optional) sees every tick.
-  // `log` (optional) gets one line per safety event (timeout engaged, forces resumed).
+  // `log` (optional) gets one line per safety event (timeout engaged, forces resumed) and,
+  // at most once a second, a line when the server says it ignores this device's poses.
   void Run(const std::atomic<bool>& stop, const std::function<void(const TickRecord&)>& on_tick = {},
            const std::function<void(const std::string&)>& log = {});
 

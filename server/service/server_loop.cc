@@ -138,6 +138,7 @@ void ServerLoop::CloseSession(std::map<std::string, Client>::iterator it) {
   closed_session_counters_.force_write_errors += c.force_write_errors;
   closed_session_counters_.contact_frames_dropped += c.contact_frames_dropped;
   closed_session_counters_.sequence_gaps += c.sequence_gaps;
+  closed_session_counters_.ignored_notices += c.ignored_notices;
   Log(kLogSession, "session closed for '" + it->first + "'");
   sessions_.erase(it);
   ++counters_.sessions_closed;
@@ -252,6 +253,7 @@ void ServerLoop::ProcessPoses() {
     const PoseVerdict verdict = client->session->Check(pose, receive_ns, options_.limits);
     if (verdict != PoseVerdict::kAccept) {
       Count(verdict, id);
+      client->session->NotifyIgnored(pose, receive_ns, verdict);  // the client is told why
       continue;
     }
     if (client->has_pending) ++counters_.superseded;
@@ -302,12 +304,14 @@ ServerCounters ServerLoop::counters() const {
     s.force_write_errors += live.force_write_errors;
     s.contact_frames_dropped += live.contact_frames_dropped;
     s.sequence_gaps += live.sequence_gaps;
+    s.ignored_notices += live.ignored_notices;
   }
   c.steps = s.steps;
   c.non_finite_forces = s.non_finite_forces;
   c.force_write_errors = s.force_write_errors;
   c.contact_frames_dropped = s.contact_frames_dropped;
   c.sequence_gaps = s.sequence_gaps;
+  c.ignored_notices = s.ignored_notices;
   return c;
 }
 
@@ -350,7 +354,7 @@ std::string ServerLoop::Summary() const {
                 "sequence gaps %llu; "
                 "bad input: nan %llu, workspace %llu, jumps %llu, out-of-order %llu, duplicates %llu, "
                 "unknown clients %llu, floods %llu; non-finite forces %llu, force write errors %llu, "
-                "contact frames dropped %llu",
+                "contact frames dropped %llu; ignored-pose notices sent %llu",
                 static_cast<unsigned long long>(c.steps), static_cast<unsigned long long>(c.parallel_batches),
                 pool_.threads(), static_cast<unsigned long long>(c.sessions_opened),
                 sessions_.size(), static_cast<unsigned long long>(c.superseded),
@@ -360,7 +364,8 @@ std::string ServerLoop::Summary() const {
                 static_cast<unsigned long long>(in.duplicates), static_cast<unsigned long long>(in.unknown_clients),
                 static_cast<unsigned long long>(in.floods), static_cast<unsigned long long>(c.non_finite_forces),
                 static_cast<unsigned long long>(c.force_write_errors),
-                static_cast<unsigned long long>(c.contact_frames_dropped));
+                static_cast<unsigned long long>(c.contact_frames_dropped),
+                static_cast<unsigned long long>(c.ignored_notices));
   return line;
 }
 

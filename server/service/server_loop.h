@@ -50,6 +50,7 @@ struct ServerCounters {
   uint64_t force_write_errors = 0;
   uint64_t contact_frames_dropped = 0;
   uint64_t sequence_gaps = 0;       // sequences never stepped (superseded + lost + overwritten)
+  uint64_t ignored_notices = 0;     // FeedbackForce notices telling a client its pose was ignored
   uint64_t sessions_opened = 0;
   uint64_t sessions_closed = 0;
   uint64_t status_published = 0;

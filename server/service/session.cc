@@ -75,6 +75,8 @@ int64_t Session::StepAndPublish(const hapco_idl_DevicePose& pose, int64_t receiv
   force_.separating_count = static_cast<uint32_t>(out.state_counts[0]);
   force_.sticking_count = static_cast<uint32_t>(out.state_counts[1]);
   force_.sliding_count = static_cast<uint32_t>(out.state_counts[2]);
+  force_.pose_verdict = hapco_idl_POSE_STEPPED;
+  force_.ignored_poses = counters_.ignored_poses;
   force_.server_send_ns = MonotonicNowNs();
   if (force_writer_.Write(force_) != DDS_RETCODE_OK) ++counters_.force_write_errors;
   // The contact frame goes after the force: the force is the latency-critical sample.
@@ -93,6 +95,36 @@ int64_t Session::StepAndPublish(const hapco_idl_DevicePose& pose, int64_t receiv
   frame_->sliding_count = force_.sliding_count;
   if (contact_writer_.Write(*frame_) != DDS_RETCODE_OK) ++counters_.contact_frames_dropped;
   return MonotonicNowNs() - receive_ns;
+}
+
+void Session::NotifyIgnored(const hapco_idl_DevicePose& pose, int64_t receive_ns, PoseVerdict verdict) {
+  hapco_idl_PoseVerdict idl_verdict;
+  switch (verdict) {
+    case PoseVerdict::kNonFinite: idl_verdict = hapco_idl_POSE_IGNORED_NOT_FINITE; break;
+    case PoseVerdict::kOutOfWorkspace: idl_verdict = hapco_idl_POSE_IGNORED_OUT_OF_WORKSPACE; break;
+    case PoseVerdict::kJump: idl_verdict = hapco_idl_POSE_IGNORED_JUMP; break;
+    default: return;  // duplicates, reordering and floods are the network's, not the user's
+  }
+  ++counters_.ignored_poses;
+  if (any_notice_ && receive_ns - last_notice_ns_ < kNoticePeriodNs) return;
+  any_notice_ = true;
+  last_notice_ns_ = receive_ns;
+  // The last force sent, as sent (force_ holds it; zero before the first step), answering
+  // this pose: the device keeps rendering what it has.
+  hapco_idl_FeedbackForce notice = force_;
+  SetClientId(notice.client_id, client_id_);
+  notice.force_n = ToIdl(last_good_force_n_);
+  notice.pose_sequence = pose.sequence_number;
+  notice.client_time_ns = pose.client_time_ns;
+  notice.server_receive_ns = receive_ns;
+  notice.pose_verdict = idl_verdict;
+  notice.ignored_poses = counters_.ignored_poses;
+  notice.server_send_ns = MonotonicNowNs();
+  if (force_writer_.Write(notice) == DDS_RETCODE_OK) {
+    ++counters_.ignored_notices;
+  } else {
+    ++counters_.force_write_errors;
+  }
 }
 
 void Session::FillContactFrame(uint64_t pose_sequence) {
@@ -128,6 +160,7 @@ void Session::Reset() {
   sim_.Reset();
   stream_.Reset();
   last_good_force_n_.setZero();
+  any_notice_ = false;
 }
 
 }  // namespace hapco::service

@@ -32,6 +32,8 @@ struct SessionCounters {
   uint64_t sequence_gaps = 0;          // sequence numbers skipped between stepped poses:
                                        // superseded (also counted there), lost on the
                                        // network, or overwritten in the reader
+  uint64_t ignored_poses = 0;          // not finite, out of the workspace or a jump
+  uint64_t ignored_notices = 0;        // FeedbackForce notices sent about them
 };
 
 // What a session computes per pose. kNone is the load tests' floor: the same DDS path,
@@ -59,6 +61,13 @@ class Session {
   // Returns the step wall time in ns (solve + publish).
   int64_t StepAndPublish(const hapco_idl_DevicePose& pose, int64_t receive_ns);
 
+  // Counts a pose the server ignores (not finite, outside the workspace, a jump) and tells
+  // the client: a FeedbackForce answering it with the last force sent (unchanged) and the
+  // verdict, at most one per kNoticePeriodNs (receive_ns, server clock) per session, so the
+  // notice costs at most 10 samples/s however fast the client sends bad poses.
+  void NotifyIgnored(const hapco_idl_DevicePose& pose, int64_t receive_ns, PoseVerdict verdict);
+  static constexpr int64_t kNoticePeriodNs = 100'000'000;
+
   // SESSION_RESET (and a repeated SESSION_JOIN: a restarted client): reference
   // configuration, the stream restarts (any next sequence and position accepted).
   void Reset();
@@ -82,6 +91,8 @@ class Session {
   hapco_idl_FeedbackForce force_{};
   PoseStream stream_;  // flood bucket, order and jump checks (the fuzzed code, pose_intake.h)
   Eigen::Vector3d last_good_force_n_ = Eigen::Vector3d::Zero();
+  bool any_notice_ = false;   // an ignored-pose notice was sent (since start or reset)
+  int64_t last_notice_ns_ = 0;  // its receive time, server clock
   SessionCounters counters_;
 };
 
