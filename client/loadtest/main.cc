@@ -20,7 +20,8 @@
 #include <thread>
 #include <vector>
 
-#include "common/cli.h"
+#include "cli/command_line.h"
+#include "cli/run_main.h"
 #include "common/error.h"
 #include "common/realtime.h"
 #include "common/statistics.h"
@@ -32,40 +33,12 @@
 
 namespace {
 
-constexpr const char* kUsage = R"(usage: hapco-loadtest SCENE.txtpb --clients N --duration S [options]
+constexpr const char* kDescription =
+    R"(Runs N emulated PHANToM devices (one thread and one DDS participant each, client ids P-1..P-N) against a running hapco-server for S seconds each, at 1 kHz, and reports per client and in total: round trip (pose sampled -> force arrived) p50/p99/p99.9/max, missed servo ticks, poses never answered, stale-force ticks, force stability (tracking error against the server's force for the same pose, high-frequency ratio, passivity-observer energy) and the server's step times and CPU use (ServerStatus). Definitions: docs/load-and-network.md.)";
 
-Runs N emulated PHANToM devices (one thread and one DDS participant each, client ids
-P-1..P-N) against a running hapco-server for S seconds each, at 1 kHz, and reports per client
-and in total: round trip (pose sampled -> force arrived) p50/p99/p99.9/max, missed servo
-ticks, poses never answered, stale-force ticks, force stability (tracking error against the
-server's force for the same pose, high-frequency ratio, passivity-observer energy) and the
-server's step times and CPU use (ServerStatus). Definitions: docs/load-and-network.md.
-
-  --clients N         emulated devices, 1..100 (required)
-  --duration S        seconds each client runs (required)
-  --mode M            kinematic (default): the device follows the trajectory exactly;
-                      hand: a hand model drags the device (hapco-phantom --help)
-  --trajectory-loop   go back and forth along the scene's trajectory for the whole run
-                      (default: run it once, then hold its last point)
-  --stagger-ms M      client i starts i*M ms after client 0 (default 100)
-  --domain D          DDS domain id (default 0); configuration from CYCLONEDDS_URI
-  --client-prefix P   client ids P-1..P-N (default lt)
-  --csv-dir DIR       write DIR/summary.csv (one row per client + "all"), DIR/ticks-ID.csv
-                      (one row per tick), DIR/roundtrip.csv (every force's round trip)
-  --plots             charts into DIR (needs --csv-dir) via scripts/plot_loadtest.py
-  --timeout-ms T      no new force for T ms -> the client ramps the force to zero in 20 ms
-                      (default 50)
-  --rt-priority P     SCHED_FIFO priority 1..99 for the clients (and DDS's threads); default 0
-  --connect-timeout-s S  wait at most S s for the server (default 30)
-  --quiet             no progress line
-  --help              this text
-  --version           the HapCo version and git revision, then exit
-
-Progress on stderr about once a second: elapsed time, clients running, forces/s received,
-missed ticks in the last second, the server's sessions, step p99 and CPU (latest status).
-Exit code: 0 when it ran (also if it measured misses), 1 bad input, 2 no server found
-(no client connected), 3 DDS failure.
-)";
+constexpr const char* kFooter =
+    R"(Progress on stderr about once a second (unless --quiet): elapsed time, clients running, forces/s received, missed ticks in the last second, the server's sessions, step p99 and CPU (latest status).
+Exit code: 0 when it ran (also if it measured misses), 1 bad input, 2 no server found (no client connected), 3 DDS failure.)";
 
 struct Options {
   std::string scene_path, mode = "kinematic", prefix = "lt", csv_dir;
@@ -74,62 +47,83 @@ struct Options {
   bool loop = false, plots = false, quiet = false;
 };
 
-Options Parse(int argc, char** argv) {
-  using hapco::cli::ParseInteger;
-  using hapco::cli::ParsePositive;
-  Options o;
-  for (int i = 1; i < argc; ++i) {
-    const std::string arg = argv[i];
-    auto value = [&]() -> const char* {
-      if (i + 1 >= argc) throw hapco::InputError(arg + " needs a value (see --help)");
-      return argv[++i];
-    };
-    if (arg == "--help" || arg == "-h") {
-      std::fputs(kUsage, stdout);
-      std::exit(0);
-    } else if (arg == "--clients") {
-      o.clients = static_cast<int>(ParseInteger("--clients", value(), 1, 100));
-    } else if (arg == "--duration") {
-      o.duration_s = ParsePositive("--duration", value());
-    } else if (arg == "--mode") {
-      o.mode = value();
-      if (o.mode != "kinematic" && o.mode != "hand") throw hapco::InputError("--mode must be kinematic or hand");
-    } else if (arg == "--trajectory-loop") {
-      o.loop = true;
-    } else if (arg == "--stagger-ms") {
-      o.stagger_ms = hapco::cli::ParseDouble("--stagger-ms", value());
-      if (o.stagger_ms < 0) throw hapco::InputError("--stagger-ms expects a number >= 0");
-    } else if (arg == "--domain") {
-      o.domain = static_cast<int>(ParseInteger("--domain", value(), 0, 230));
-    } else if (arg == "--client-prefix") {
-      o.prefix = value();
-    } else if (arg == "--csv-dir") {
-      o.csv_dir = value();
-    } else if (arg == "--plots") {
-      o.plots = true;
-    } else if (arg == "--timeout-ms") {
-      o.timeout_ms = ParsePositive("--timeout-ms", value());
-    } else if (arg == "--rt-priority") {
-      o.rt_priority = static_cast<int>(ParseInteger("--rt-priority", value(), 0, 99));
-    } else if (arg == "--connect-timeout-s") {
-      o.connect_timeout_s = ParsePositive("--connect-timeout-s", value());
-    } else if (arg == "--quiet") {
-      o.quiet = true;
-    } else if (!arg.empty() && arg[0] == '-') {
-      throw hapco::InputError("unknown option " + arg + " (see --help)");
-    } else if (o.scene_path.empty()) {
-      o.scene_path = arg;
-    } else {
-      throw hapco::InputError("only one scene file is accepted (see --help)");
+// "out", "out/" and "./out" are the same directory.
+bool SameDirectory(const std::string& a, const std::string& b) {
+  const auto normal = [](const std::string& path) {
+    std::error_code error;
+    return std::filesystem::absolute(std::filesystem::path(path) / ".", error).lexically_normal();
+  };
+  return normal(a) == normal(b);
+}
+
+// Defines the command line (docs/cli.md) and parses it; false: --help/--version answered.
+bool Parse(int argc, char** argv, Options* o) {
+  hapco::cli::CommandLine command("hapco-loadtest", "SCENE.txtpb --clients N --duration-s S [options]", kDescription,
+                                  kFooter);
+  // Checked below: an old `--plots SCENE` may have taken the scene as its value, and an unknown
+  // option is named before a missing scene.
+  command.AddScene(&o->scene_path, "scene file the server runs (proto/scene.proto): every client follows its "
+                                   "trajectory and joins a session of its name")
+      ->required(false);
+  command.AddInteger("--clients", &o->clients, "N", "emulated devices, 1..100 (required)", "Run", 1, 100);
+  command.AddDuration(&o->duration_s, "seconds each client runs (required)");
+  command.AddNumber("--stagger-ms", &o->stagger_ms, "M", "client i starts i*M ms after client 0 (default 100)",
+                    "Run", 0, HUGE_VAL);
+  command.AddFlag("--trajectory-loop", &o->loop,
+                  "go back and forth along the scene's trajectory for the whole run (default: run it once, then "
+                  "hold its last point)",
+                  "Run");
+  command.AddChoice("--mode", &o->mode, {"kinematic", "hand"},
+                    "kinematic (default): the device follows the trajectory exactly; hand: a hand model drags the "
+                    "device (hapco-phantom --help)",
+                    "Device");
+  command.AddForceTimeout(&o->timeout_ms);
+  command.AddDomain(&o->domain);
+  command.AddText("--client-prefix", &o->prefix, "P", "client ids P-1..P-N (default lt)", hapco::cli::kGroupDds);
+  command.AddConnectTimeout(&o->connect_timeout_s, "wait at most S s for the server (default 30)");
+  command.AddText("--csv-dir", &o->csv_dir, "DIR",
+                  "write DIR/summary.csv (one row per client + \"all\"), DIR/ticks-ID.csv (one row per tick), "
+                  "DIR/roundtrip.csv (every force's round trip)",
+                  hapco::cli::kGroupOutput);
+  std::string plots_dir;
+  CLI::Option* plots = command.AddText("--plots", &plots_dir, "DIR",
+                                       "write the CSVs (those of --csv-dir) and their charts "
+                                       "(roundtrip-cdf.png, forces.png) to DIR, via scripts/plot_loadtest.py "
+                                       "(needs /usr/bin/python3 with matplotlib)",
+                                       hapco::cli::kGroupOutput);
+  plots->expected(0, 1);  // the old form `--csv-dir DIR --plots` had no value
+  command.AddRtPriority(&o->rt_priority, "the clients");
+  command.AddQuiet(&o->quiet, "no progress line (the results are still printed)");
+  command.Deprecate("--timeout-ms", "--force-timeout-ms");
+  command.Deprecate("--duration", "--duration-s");
+  if (!command.Parse(argc, argv)) return false;
+
+  if (plots->count() > 0) {
+    std::error_code error;
+    if (!plots_dir.empty() && std::filesystem::is_regular_file(plots_dir, error)) {
+      // `--plots SCENE.txtpb ...`: the old valueless --plots before the scene argument.
+      if (!o->scene_path.empty()) throw hapco::InputError("--plots expects a directory, got the file '" + plots_dir + "'");
+      o->scene_path = plots_dir;
+      plots_dir.clear();
     }
+    if (plots_dir.empty()) {
+      if (o->csv_dir.empty()) throw hapco::InputError("--plots needs a directory: --plots DIR (see --help)");
+      std::fprintf(stderr, "hapco-loadtest: note: --plots without a directory is deprecated, use --plots DIR\n");
+    } else if (o->csv_dir.empty()) {
+      o->csv_dir = plots_dir;
+    } else if (!SameDirectory(o->csv_dir, plots_dir)) {
+      throw hapco::InputError("--plots " + plots_dir + " and --csv-dir " + o->csv_dir +
+                              " name different directories: the charts are drawn from the CSVs in their own "
+                              "directory (--plots DIR writes both)");
+    }
+    o->plots = true;
   }
-  if (o.scene_path.empty()) throw hapco::InputError("missing SCENE argument (see --help)");
-  if (o.clients == 0) throw hapco::InputError("--clients is required (see --help)");
-  if (o.duration_s == 0) throw hapco::InputError("--duration is required (see --help)");
-  if (o.plots && o.csv_dir.empty()) throw hapco::InputError("--plots needs --csv-dir DIR");
+  if (o->scene_path.empty()) throw hapco::InputError("missing SCENE argument (see --help)");
+  if (o->clients == 0) throw hapco::InputError("--clients is required (see --help)");
+  if (o->duration_s == 0) throw hapco::InputError("--duration-s is required (see --help)");
   // The longest id must still be valid (1..64 of [A-Za-z0-9_.-]).
-  hapco::service::ValidateClientId(o.prefix + "-" + std::to_string(o.clients));
-  return o;
+  hapco::service::ValidateClientId(o->prefix + "-" + std::to_string(o->clients));
+  return true;
 }
 
 std::atomic<bool> g_stop{false};
@@ -262,7 +256,7 @@ ServerSummary SummarizeServer(const std::vector<StatusSample>& all, double windo
 
 std::FILE* OpenCsv(const std::string& path) {
   std::FILE* f = std::fopen(path.c_str(), "w");
-  if (f == nullptr) throw hapco::InputError("cannot write " + path + " (does --csv-dir exist and is it writable?)");
+  if (f == nullptr) throw hapco::InputError("cannot write " + path + " (is the --csv-dir / --plots directory writable?)");
   return f;
 }
 
@@ -589,5 +583,8 @@ int Run(const Options& o) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  return hapco::cli::RunMain("hapco-loadtest", argc, argv, [&] { return Run(Parse(argc, argv)); });
+  return hapco::cli::RunMain("hapco-loadtest", [&] {
+    Options options;
+    return Parse(argc, argv, &options) ? Run(options) : 0;
+  });
 }

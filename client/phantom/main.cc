@@ -11,7 +11,8 @@
 #include <string>
 #include <vector>
 
-#include "common/cli.h"
+#include "cli/command_line.h"
+#include "cli/run_main.h"
 #include "common/error.h"
 #include "common/realtime.h"
 #include "common/statistics.h"
@@ -23,37 +24,13 @@
 
 namespace {
 
-constexpr const char* kUsage = R"(usage: hapco-phantom SCENE.txtpb --client-id ID [options]
+constexpr const char* kDescription =
+    R"(A simulated haptic device that drives a hapco-server session at 1 kHz: every tick it publishes the device's pose, takes the newest force (never waiting) and renders it through the safety filter. It counts missed ticks, stale-force ticks and the round trip of each force, and prints a summary at the end. Guide: docs/haptic-service.md.)";
 
-A simulated haptic device that drives a hapco-server session at 1 kHz.
-
-  --client-id ID      session id, 1..64 of [A-Za-z0-9_.-] (required)
-  --domain N          DDS domain id (default 0); configuration from CYCLONEDDS_URI
-  --mode M            kinematic (default): tick k publishes exactly the trajectory's step k
-                      (no quantisation, so forces compare with hapco-sim);
-                      hand: a hand (spring-damper, 300 N/m, 6 N s/m) drags a 0.05 kg device
-                      with 0.5 N s/m damping along the trajectory, pushed back by the rendered
-                      force; positions quantised to 0.023 mm
-  --trajectory T      scene (default: the scene's phases, one step per tick) or a CSV file,
-                      one row per tick, columns x_m,y_m,z_m or dx_m,dy_m,dz_m found by header
-                      name (hapco-server --trace, hapco-sim --csv, hapco-report --csv)
-  --duration S        run S seconds (holding the trajectory's last point after its end);
-                      default: the trajectory's length
-  --csv FILE          one row per tick (tick, time, pose sequence, position, force sequence,
-                      raw force, rendered force, round trip, render latency, stale flag;
-                      force sequence -1 = no new force), plus a row per extra force received
-                      within the same tick
-  --timeout-ms T      no new force for T ms -> the rendered force ramps to zero in 20 ms
-                      (default 50); it resumes (rate limited) when forces return
-  --rt-priority N     SCHED_FIFO priority 1..99 for the tick (needs CAP_SYS_NICE; default 0)
-  --connect-timeout-s S  wait at most S s for the server (default 30)
-  --help              this text
-  --version           the HapCo version and git revision, then exit
-
-Safety (every tick): a NaN/Inf force is never rendered (the last good one is kept), the
-magnitude is clamped to 7.9 N, the change per tick is limited to 0.25 N (250 N/s).
-Exit code: 0 done, 1 bad input, 2 no server found, 3 DDS failure.
-)";
+constexpr const char* kFooter =
+    R"(Safety (every tick): a NaN/Inf force is never rendered (the last good one is kept), the magnitude is clamped to 7.9 N, the change per tick is limited to 0.25 N (250 N/s).
+SIGINT/SIGTERM: the run stops, the session is left and the summary printed.
+Exit code: 0 done, 1 bad input, 2 no server found, 3 DDS failure.)";
 
 struct Options {
   std::string scene_path, client_id, mode = "kinematic", trajectory = "scene", csv_path;
@@ -61,56 +38,42 @@ struct Options {
   double duration_s = 0, timeout_ms = 50, connect_timeout_s = 30;
 };
 
-Options Parse(int argc, char** argv) {
-  Options o;
-  for (int i = 1; i < argc; ++i) {
-    const std::string arg = argv[i];
-    auto value = [&]() -> const char* {
-      if (i + 1 >= argc) throw hapco::InputError(arg + " needs a value (see --help)");
-      return argv[++i];
-    };
-    if (arg == "--help" || arg == "-h") {
-      std::fputs(kUsage, stdout);
-      std::exit(0);
-    } else if (arg == "--client-id") {
-      o.client_id = value();
-    } else if (arg == "--domain") {
-      char* end = nullptr;
-      const char* text = value();
-      const long d = std::strtol(text, &end, 10);
-      if (end == text || *end != '\0' || d < 0 || d > 230) throw hapco::InputError("--domain expects 0..230");
-      o.domain = static_cast<int>(d);
-    } else if (arg == "--mode") {
-      o.mode = value();
-      if (o.mode != "kinematic" && o.mode != "hand") throw hapco::InputError("--mode must be kinematic or hand");
-    } else if (arg == "--trajectory") {
-      o.trajectory = value();
-    } else if (arg == "--duration") {
-      o.duration_s = hapco::cli::ParsePositive("--duration", value());
-    } else if (arg == "--csv") {
-      o.csv_path = value();
-    } else if (arg == "--timeout-ms") {
-      o.timeout_ms = hapco::cli::ParsePositive("--timeout-ms", value());
-    } else if (arg == "--rt-priority") {
-      char* end = nullptr;
-      const char* text = value();
-      const long priority = std::strtol(text, &end, 10);
-      if (end == text || *end != '\0' || priority < 0 || priority > 99) throw hapco::InputError("--rt-priority expects 0..99");
-      o.rt_priority = static_cast<int>(priority);
-    } else if (arg == "--connect-timeout-s") {
-      o.connect_timeout_s = hapco::cli::ParsePositive("--connect-timeout-s", value());
-    } else if (!arg.empty() && arg[0] == '-') {
-      throw hapco::InputError("unknown option " + arg + " (see --help)");
-    } else if (o.scene_path.empty()) {
-      o.scene_path = arg;
-    } else {
-      throw hapco::InputError("only one scene file is accepted (see --help)");
-    }
-  }
-  if (o.scene_path.empty()) throw hapco::InputError("missing SCENE argument (see --help)");
-  if (o.client_id.empty()) throw hapco::InputError("--client-id is required (see --help)");
-  hapco::service::ValidateClientId(o.client_id);
-  return o;
+// Defines the command line (docs/cli.md) and parses it; false: --help/--version answered.
+bool Parse(int argc, char** argv, Options* o) {
+  hapco::cli::CommandLine command("hapco-phantom", "SCENE.txtpb --client-id ID [options]", kDescription, kFooter);
+  // Checked below, so that an unknown option is named before a missing scene.
+  command.AddScene(&o->scene_path, "scene file (proto/scene.proto): its trajectory and its name, sent in the "
+                                   "SESSION_JOIN so that the server opens a session of that scene");
+  command.AddText("--client-id", &o->client_id, "ID", "session id, 1..64 of [A-Za-z0-9_.-] (required)", "Device");
+  command.AddChoice("--mode", &o->mode, {"kinematic", "hand"},
+                    "kinematic (default): tick k publishes exactly the trajectory's step k (no quantisation, so "
+                    "forces compare with hapco-sim); hand: a hand (spring-damper, 300 N/m, 6 N s/m) drags a 0.05 kg "
+                    "device with 0.5 N s/m damping along the trajectory, pushed back by the rendered force; "
+                    "positions quantised to 0.023 mm",
+                    "Device");
+  command.AddForceTimeout(&o->timeout_ms);
+  command.AddText("--trajectory", &o->trajectory, "T",
+                  "scene (default: the scene's phases, one step per tick) or a CSV file, one row per tick, columns "
+                  "x_m,y_m,z_m or dx_m,dy_m,dz_m found by header name (hapco-server --trace, hapco-sim --csv, "
+                  "hapco-report --csv)",
+                  "Run");
+  command.AddDuration(&o->duration_s,
+                      "run S seconds, holding the trajectory's last point after its end (default: the "
+                      "trajectory's length)");
+  command.AddDomain(&o->domain);
+  command.AddConnectTimeout(&o->connect_timeout_s, "wait at most S s for the server (default 30)");
+  command.AddCsv(&o->csv_path,
+                 "one row per tick (tick, time, pose sequence, position, force sequence, raw force, rendered "
+                 "force, round trip, render latency, stale flag; force sequence -1 = no new force), plus a row "
+                 "per extra force received within the same tick");
+  command.AddRtPriority(&o->rt_priority, "the servo tick");
+  command.Deprecate("--timeout-ms", "--force-timeout-ms");
+  command.Deprecate("--duration", "--duration-s");
+  if (!command.Parse(argc, argv)) return false;
+
+  if (o->client_id.empty()) throw hapco::InputError("--client-id is required (see --help)");
+  hapco::service::ValidateClientId(o->client_id);
+  return true;
 }
 
 // Trajectory points 0..N (point 0 = start), m.
@@ -206,5 +169,8 @@ int Run(const Options& o) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  return hapco::cli::RunMain("hapco-phantom", argc, argv, [&] { return Run(Parse(argc, argv)); });
+  return hapco::cli::RunMain("hapco-phantom", [&] {
+    Options options;
+    return Parse(argc, argv, &options) ? Run(options) : 0;
+  });
 }

@@ -21,7 +21,8 @@
 #include <memory>
 #include <string>
 
-#include "common/cli.h"
+#include "cli/command_line.h"
+#include "cli/run_main.h"
 #include "common/error.h"
 #include "common/realtime.h"
 #include "common/stop_signals.h"
@@ -34,26 +35,14 @@ namespace {
 
 using hapco::service::kAllClientsPartition;
 
-constexpr const char* kUsage = R"(usage: hapco-recorder --output FILE [options]
+constexpr const char* kDescription =
+    R"(Records a live HapCo session: every client's contact-state frames and forces (partition hapco/client/*) and the server status, into a recording file (one record per server step, checksummed and flushed record by record). Read it with hapco-report. docs/recorder.md.
+Steps come from the contact-state frames; a force whose frame never arrived becomes a step with contacts_missing set. Gaps in a client's server step counter are counted as missing steps.)";
 
-Records a live HapCo session: every client's contact-state frames and forces (partition
-hapco/client/*) and the server status, into a recording file (one record per server step,
-checksummed and flushed record by record). Read it with hapco-report. docs/recorder.md.
-
-  --output FILE     recording to write (created or truncated)
-  --domain N        DDS domain id (default 0); configuration from CYCLONEDDS_URI
-  --scene FILE      scene file the server runs: its name and text go into the header
-                    (default: no scene in the header)
-  --duration S      stop after S seconds (default: run until SIGINT/SIGTERM)
-  --quiet           no progress line (the exit summary is still printed)
-  --help            this text
-  --version         the HapCo version and git revision, then exit
-
-Steps come from the contact-state frames; a force whose frame never arrived becomes a step
-with contacts_missing set. Gaps in a client's server step counter are counted as missing
-steps. SIGINT/SIGTERM: what has been received is written, then a one-line summary.
-Exit code: 0 ok, 1 bad input (flags, unwritable file, scene file), 3 DDS failure.
-)";
+constexpr const char* kFooter =
+    R"(Progress on stderr once a second (unless --quiet): records written, clients, missing steps.
+SIGINT/SIGTERM: what has been received is written, then a one-line summary.
+Exit code: 0 ok, 1 bad input (flags, unwritable file, scene file), 3 DDS failure.)";
 
 // Reader history of the frame reader, per client (instance). Depth, not KEEP_ALL: a
 // KEEP_LAST reader accepts and acknowledges every frame, so it never holds back the server's
@@ -75,33 +64,23 @@ struct Options {
   bool quiet = false;
 };
 
-Options Parse(int argc, char** argv) {
-  Options o;
-  for (int i = 1; i < argc; ++i) {
-    const std::string arg = argv[i];
-    auto value = [&]() -> const char* {
-      if (i + 1 >= argc) throw hapco::InputError(arg + " needs a value (see --help)");
-      return argv[++i];
-    };
-    if (arg == "--help" || arg == "-h") {
-      std::fputs(kUsage, stdout);
-      std::exit(0);
-    } else if (arg == "--output") {
-      o.output = value();
-    } else if (arg == "--domain") {
-      o.domain = static_cast<int>(hapco::cli::ParseInteger("--domain", value(), 0, 230));
-    } else if (arg == "--scene") {
-      o.scene_path = value();
-    } else if (arg == "--duration") {
-      o.duration_s = hapco::cli::ParsePositive("--duration", value());
-    } else if (arg == "--quiet") {
-      o.quiet = true;
-    } else {
-      throw hapco::InputError("unknown option or argument " + arg + " (see --help)");
-    }
-  }
-  if (o.output.empty()) throw hapco::InputError("--output FILE is required (see --help)");
-  return o;
+// Defines the command line (docs/cli.md) and parses it; false: --help/--version answered.
+bool Parse(int argc, char** argv, Options* o) {
+  hapco::cli::CommandLine command("hapco-recorder", "[SCENE.txtpb] --output FILE [options]", kDescription, kFooter);
+  command.AddScene(&o->scene_path,
+                   "scene file the server runs: its name and text go into the header (optional; without it the "
+                   "header holds no scene)")
+      ->required(false);
+  command.AddOutput(&o->output, "recording to write, created or truncated (required)");
+  command.AddDomain(&o->domain);
+  command.AddDuration(&o->duration_s, "stop after S seconds (default: run until SIGINT/SIGTERM)");
+  command.AddQuiet(&o->quiet, "no progress line (the exit summary is still printed)");
+  command.Deprecate("--scene", "");
+  command.Deprecate("--duration", "--duration-s");
+  if (!command.Parse(argc, argv)) return false;
+
+  if (o->output.empty()) throw hapco::InputError("--output FILE is required (see --help)");
+  return true;
 }
 
 // Same spelling as hapco-sim recordings (contact::StatusName). A step without contacts ran
@@ -150,6 +129,8 @@ class Recorder {
   explicit Recorder(hapco::io::RecordingWriter* writer) : writer_(writer) {}
 
   void OnForce(const hapco_idl_FeedbackForce& force) {
+    // A notice that the server ignored a pose answers no step: nothing to record.
+    if (force.pose_verdict != hapco_idl_POSE_STEPPED) return;
     ++forces_seen_;
     ClientState& c = clients_[force.client_id];
     // Arrived after its frame (recorded already): a sequence at most kLateWindow below the
@@ -414,12 +395,15 @@ int Run(const Options& o) {
               static_cast<unsigned long long>(recorder.status_records()),
               static_cast<unsigned long long>(recorder.forces_seen()), o.output.c_str(),
               static_cast<unsigned long long>(recorder.from_forces()),
-              stop_signals.ReceivedName("--duration"));
+              stop_signals.ReceivedName("--duration-s"));
   return 0;
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
-  return hapco::cli::RunMain("hapco-recorder", argc, argv, [&] { return Run(Parse(argc, argv)); });
+  return hapco::cli::RunMain("hapco-recorder", [&] {
+    Options options;
+    return Parse(argc, argv, &options) ? Run(options) : 0;
+  });
 }

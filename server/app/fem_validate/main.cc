@@ -3,15 +3,14 @@
 // optionally writes CSV for scripts/plot_validation.py (docs/validation.md).
 #include <algorithm>
 #include <cstdio>
-#include <cstring>
-#include <exception>
 #include <fstream>
 #include <string>
 #include <vector>
 
 #include <Eigen/Core>
 
-#include "common/cli.h"
+#include "cli/command_line.h"
+#include "cli/run_main.h"
 #include "common/error.h"
 #include "common/timer.h"
 #include "fem/assembly.h"
@@ -26,21 +25,12 @@ constexpr double kLength = 0.10, kWidth = 0.02, kHeight = 0.02;  // m (algorithm
 constexpr double kYoungs = 3e6, kPoisson = 0.3;                  // Pa, -
 constexpr double kLoad = 0.1;                                    // N, tip shear, downward
 
-constexpr const char* kUsage = R"(usage: hapco-fem-validate [--csv FILE] [--quick] [--help]
-
-Clamps the red bar (0.10 x 0.02 x 0.02 m, E = 3 MPa, nu = 0.3) at x = 0, applies a uniform
-downward shear traction on the x = L face (total 0.1 N, consistent nodal loads) and compares
-the mean vertical displacement of the tip face with Timoshenko beam theory
+constexpr const char* kDescription =
+    R"(Clamps the red bar (0.10 x 0.02 x 0.02 m, E = 3 MPa, nu = 0.3) at x = 0, applies a uniform downward shear traction on the x = L face (total 0.1 N, consistent nodal loads) and compares the mean vertical displacement of the tip face with Timoshenko beam theory
   delta = P L^3 / (3 E I) + P L / (kappa G A),  kappa = 10 (1 + nu) / (12 + 11 nu) (Cowper),
-for Tet4 and Tet10 over a sequence of nested box meshes.
+for Tet4 and Tet10 over a sequence of nested box meshes. Prints a table (docs/validation.md).)";
 
-  --csv FILE   also write the table as CSV (input of scripts/plot_validation.py)
-  --quick      skip the two largest meshes (for a fast check)
-  --case ORDER:NXxNYxNZ
-               run this mesh instead of the default sequence (repeatable), e.g. Tet10:12x3x3
-  --help       this text
-  --version    the HapCo version and git revision, then exit
-)";
+constexpr const char* kFooter = "Exit code: 0 on success, 1 on bad flags or an unwritable CSV file.";
 
 double BeamTheoryDeflection() {
   const double area = kWidth * kHeight;
@@ -127,25 +117,32 @@ Case ParseCase(const std::string& text) {
   return c;
 }
 
-int Run(int argc, char** argv) {
+struct Options {
   std::string csv_path;
   bool quick = false;
-  std::vector<Case> custom;
-  for (int i = 1; i < argc; ++i) {
-    const std::string arg = argv[i];
-    if (arg == "--help" || arg == "-h") {
-      std::fputs(kUsage, stdout);
-      return 0;
-    } else if (arg == "--csv" && i + 1 < argc) {
-      csv_path = argv[++i];
-    } else if (arg == "--quick") {
-      quick = true;
-    } else if (arg == "--case" && i + 1 < argc) {
-      custom.push_back(ParseCase(argv[++i]));
-    } else {
-      throw hapco::InputError("unknown argument '" + arg + "' (see --help)");
-    }
-  }
+  std::vector<Case> custom;  // --case, in the order given
+};
+
+// Defines the command line (docs/cli.md) and parses it; false: --help/--version answered.
+bool Parse(int argc, char** argv, Options* options) {
+  hapco::cli::CommandLine command("hapco-fem-validate", "[options]", kDescription, kFooter);
+  command.AddFlag("--quick", &options->quick, "skip the two largest meshes of each order (for a fast check)",
+                  "Meshes");
+  // Repeatable: every value is parsed into options->custom as it is validated (the string
+  // itself only gives the help its metavar).
+  std::string case_text;
+  command.AddText("--case", &case_text, "ORDER:NXxNYxNZ",
+                  "run this mesh instead of the default sequence (repeatable), e.g. Tet10:12x3x3", "Meshes")
+      ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll)
+      ->each([options](const std::string& text) { options->custom.push_back(ParseCase(text)); });
+  command.AddCsv(&options->csv_path, "also write the table as CSV (input of scripts/plot_validation.py)");
+  return command.Parse(argc, argv);
+}
+
+int Run(const Options& options) {
+  const bool quick = options.quick;
+  const std::string& csv_path = options.csv_path;
+  const std::vector<Case>& custom = options.custom;
   // Refinements of the bar with cubic cells (cells 5 mm down to 1.25 mm / 0.625 mm).
   std::vector<Case> cases = {
       {ElementOrder::kTet10, 5, 1, 1, false},   {ElementOrder::kTet10, 10, 2, 2, false},
@@ -193,14 +190,8 @@ int Run(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  if (hapco::cli::AsksForVersion(argc, argv)) {
-    std::printf("%s\n", hapco::cli::VersionLine("hapco-fem-validate").c_str());
-    return 0;
-  }
-  try {
-    return Run(argc, argv);
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "hapco-fem-validate: %s\n", e.what());
-    return 1;
-  }
+  return hapco::cli::RunMain("hapco-fem-validate", [&] {
+    Options options;
+    return Parse(argc, argv, &options) ? Run(options) : 0;
+  });
 }

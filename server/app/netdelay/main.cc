@@ -25,6 +25,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <fstream>
 #include <queue>
@@ -33,44 +34,21 @@
 #include <string>
 #include <vector>
 
-#include "common/cli.h"
+#include "cli/command_line.h"
+#include "cli/run_main.h"
 #include "common/error.h"
 #include "common/realtime.h"
 
 namespace {
 
-constexpr const char* kUsage = R"(usage: hapco-netdelay [options]
-
-Binds NFQUEUE queue N of the current network namespace, holds every queued packet for
-delay + jitter (sampled per packet, seeded), drops --loss-pct of them at random, and accepts
-the rest when their time is up. Route packets to it with e.g.
+constexpr const char* kDescription =
+    R"(Binds NFQUEUE queue N of the current network namespace, holds every queued packet for delay + jitter (sampled per packet, seeded), drops --loss-pct of them at random, and accepts the rest when their time is up. Route packets to it with e.g.
   iptables -A OUTPUT -o IFACE -j NFQUEUE --queue-num N
-(scripts/netlab does this in its namespaces; docs/network-lab.md).
+(scripts/netlab does this in its namespaces; docs/network-lab.md).)";
 
-  --queue-num N        NFQUEUE number (default 0)
-  --delay-ms D         mean added delay per packet, ms (default 0)
-  --jitter-ms J        jitter, ms (default 0): uniform in [D-J, D+J], or normal with
-                       standard deviation J (--jitter-dist normal); clamped at >= 0
-  --jitter-dist KIND   uniform (default, like netem without a distribution table) | normal
-  --fifo               keep packet order: a packet never leaves before an earlier one (its
-                       release time is max(own sample, previous release)). Default: packets
-                       are released at their own sampled time, so jitter reorders them, as
-                       netem does
-  --loss-pct P         drop P % of the packets at random (default 0)
-  --seed S             random seed (default 1)
-  --max-held N         kernel queue length (default 100000); beyond it the kernel drops
-  --stats-period S     print a stats line every S seconds (default 0 = only at exit)
-  --rt-priority N      SCHED_FIFO priority 1..99 for tighter release times (default 0)
-  --quiet              no start line
-  --help               this text
-  --version            the HapCo version and git revision, then exit
-
-Prints "hapco-netdelay: ready" on stderr once the queue is bound. SIGINT/SIGTERM: accepts
-every held packet at once, prints a summary (packets, dropped, added delay measured from
-receipt to verdict: mean/max, release lateness, kernel-side drops) and exits 0.
-Exit code: 0 after a clean shutdown, 1 on bad flags, 3 if the queue cannot be bound
-(not root / CAP_NET_ADMIN, or another process holds queue N).
-)";
+constexpr const char* kFooter =
+    R"(Prints "hapco-netdelay: ready" on stderr once the queue is bound. SIGINT/SIGTERM: accepts every held packet at once, prints a summary (packets, dropped, added delay measured from receipt to verdict: mean/max, release lateness, kernel-side drops) and exits 0.
+Exit code: 0 after a clean shutdown, 1 on bad flags, 3 if the queue cannot be bound (not root / CAP_NET_ADMIN, or another process holds queue N).)";
 
 struct Options {
   int queue_num = 0;
@@ -81,51 +59,61 @@ struct Options {
   int rt_priority = 0;
 };
 
-Options ParseArgs(int argc, char** argv) {
-  using hapco::InputError;
-  Options o;
-  for (int i = 1; i < argc; ++i) {
-    const std::string arg = argv[i];
-    auto value = [&]() -> const char* {
-      if (i + 1 >= argc) throw InputError(arg + " expects a value");
-      return argv[++i];
-    };
-    if (arg == "--help" || arg == "-h") {
-      std::fputs(kUsage, stdout);
-      std::exit(0);
-    } else if (arg == "--queue-num") {
-      o.queue_num = static_cast<int>(hapco::cli::ParseInteger(arg, value(), 0, 65535));
-    } else if (arg == "--delay-ms") {
-      o.delay_ms = hapco::cli::ParseDouble(arg, value());
-      if (o.delay_ms < 0.0 || o.delay_ms > 10000.0) throw InputError("--delay-ms must be in [0, 10000]");
-    } else if (arg == "--jitter-ms") {
-      o.jitter_ms = hapco::cli::ParseDouble(arg, value());
-      if (o.jitter_ms < 0.0 || o.jitter_ms > 10000.0) throw InputError("--jitter-ms must be in [0, 10000]");
-    } else if (arg == "--jitter-dist") {
-      const std::string kind = value();
-      if (kind != "uniform" && kind != "normal") throw InputError("--jitter-dist expects uniform or normal, got '" + kind + "'");
-      o.normal = kind == "normal";
-    } else if (arg == "--fifo") {
-      o.fifo = true;
-    } else if (arg == "--loss-pct") {
-      o.loss_pct = hapco::cli::ParseDouble(arg, value());
-      if (o.loss_pct < 0.0 || o.loss_pct > 100.0) throw InputError("--loss-pct must be in [0, 100]");
-    } else if (arg == "--seed") {
-      o.seed = static_cast<std::uint64_t>(hapco::cli::ParseInteger(arg, value(), 0, 0x7fffffffffffffffL));
-    } else if (arg == "--max-held") {
-      o.max_held = static_cast<unsigned>(hapco::cli::ParseInteger(arg, value(), 1, 10000000));
-    } else if (arg == "--stats-period") {
-      o.stats_period_s = hapco::cli::ParseDouble(arg, value());
-      if (o.stats_period_s < 0.0) throw InputError("--stats-period must be >= 0");
-    } else if (arg == "--rt-priority") {
-      o.rt_priority = static_cast<int>(hapco::cli::ParseInteger(arg, value(), 0, 99));
-    } else if (arg == "--quiet") {
-      o.quiet = true;
-    } else {
-      throw InputError("unknown option '" + arg + "' (see --help)");
-    }
-  }
-  return o;
+// Defines the command line (docs/cli.md) and parses it; false: --help/--version answered.
+bool Parse(int argc, char** argv, Options* o) {
+  hapco::cli::CommandLine command("hapco-netdelay", "[options]", kDescription, kFooter);
+  command.AddInteger("--queue-num", &o->queue_num, "N", "NFQUEUE number, 0..65535 (default 0)", "Queue", 0, 65535);
+  int max_held = static_cast<int>(o->max_held);
+  command.AddInteger("--max-held", &max_held, "N",
+                     "kernel queue length, 1..10000000 (default 100000); beyond it the kernel drops", "Queue", 1,
+                     10000000);
+  command.AddNumber("--delay-ms", &o->delay_ms, "D", "mean added delay per packet, ms, 0..10000 (default 0)",
+                    "Impairment", 0, 10000);
+  command.AddNumber("--jitter-ms", &o->jitter_ms, "J",
+                    "jitter, ms, 0..10000 (default 0): uniform in [D-J, D+J], or normal with standard deviation J "
+                    "(--jitter-dist normal); a negative sampled delay counts as 0",
+                    "Impairment", 0, 10000);
+  std::string jitter_dist = "uniform";
+  command.AddChoice("--jitter-dist", &jitter_dist, {"uniform", "normal"},
+                    "uniform (default, like netem without a distribution table) or normal", "Impairment");
+  command.AddFlag("--fifo", &o->fifo,
+                  "keep packet order: a packet never leaves before an earlier one (its release time is max(own "
+                  "sample, previous release)). Default: packets are released at their own sampled time, so "
+                  "jitter reorders them, as netem does",
+                  "Impairment");
+  command.AddNumber("--loss-pct", &o->loss_pct, "P", "drop P % of the packets at random, 0..100 (default 0)",
+                    "Impairment", 0, 100);
+  // 64-bit: beyond AddInteger's int, same message.
+  constexpr long kMaxSeed = 0x7fffffffffffffffL;
+  std::string seed_text = "1";
+  command.AddText("--seed", &seed_text, "S", "random seed, 0..2^63-1 (default 1)", "Impairment")
+      ->check(CLI::Validator(
+          [](std::string& text) -> std::string {
+            char* end = nullptr;
+            errno = 0;
+            const long long seed = std::strtoll(text.c_str(), &end, 10);
+            if (text.empty() || *end != '\0' || errno == ERANGE || seed < 0) {
+              throw hapco::InputError("--seed expects an integer in [0, " + std::to_string(kMaxSeed) + "], got '" +
+                                      text + "'");
+            }
+            return "";
+          },
+          ""));
+  command.AddNumber("--stats-period-s", &o->stats_period_s, "S",
+                    "print a stats line every S seconds (default 0 = only the summary at exit)",
+                    hapco::cli::kGroupOutput, 0, HUGE_VAL);
+  // The shared definition (name, range, group); its help mentions DDS, which netdelay has none of.
+  command.AddRtPriority(&o->rt_priority, "the release loop")
+      ->description("run the release loop with SCHED_FIFO priority N, for tighter release times (1..99; needs "
+                    "CAP_SYS_NICE; default 0 = normal policy)");
+  command.AddQuiet(&o->quiet, "no start line (\"ready\" and the summary are still printed)");
+  command.Deprecate("--stats-period", "--stats-period-s");
+  if (!command.Parse(argc, argv)) return false;
+
+  o->max_held = static_cast<unsigned>(max_held);
+  o->normal = jitter_dist == "normal";
+  o->seed = std::stoull(seed_text);
+  return true;
 }
 
 struct Held {
@@ -166,7 +154,7 @@ struct State {
   std::uint64_t netlink_overruns = 0;
   std::size_t peak_held = 0;
   Stat added, lateness;                // receipt -> verdict; release time -> verdict
-  Stat interval_added;                 // for --stats-period
+  Stat interval_added;                 // for --stats-period-s
   std::uint64_t interval_packets = 0;
 };
 
@@ -369,5 +357,8 @@ int Run(const Options& o) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  return hapco::cli::RunMain("hapco-netdelay", argc, argv, [&] { return Run(ParseArgs(argc, argv)); });
+  return hapco::cli::RunMain("hapco-netdelay", [&] {
+    Options options;
+    return Parse(argc, argv, &options) ? Run(options) : 0;
+  });
 }

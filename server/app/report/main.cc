@@ -4,58 +4,55 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
-#include <cstring>
 #include <map>
 #include <string>
 #include <vector>
 
-#include "common/cli.h"
+#include "cli/command_line.h"
+#include "cli/run_main.h"
 #include "common/error.h"
 #include "common/statistics.h"
 #include "io/recording.h"
 
 namespace {
 
-constexpr const char* kUsage = R"(usage: hapco-report RECORDING [--csv FILE] [--plots DIR]
+constexpr const char* kDescription =
+    R"(Reads a HapCo recording (hapco-sim --output, hapco-recorder), prints what it holds and how it ends (a torn tail from a writer that was killed is skipped and reported), and optionally writes one CSV row per step and PNG charts: force over time, contacts by state over time, round-trip histogram (online recordings).)";
 
-Reads a HapCo recording (hapco-sim --record, hapco-recorder), prints what it holds and how it
-ends (a torn tail from a writer that was killed is skipped and reported), and optionally
-writes one CSV row per step and PNG charts: force over time, contacts by state over time,
-round-trip histogram (online recordings).
+constexpr const char* kFooter =
+    "Exit code: 0 on success, 1 on a missing/unreadable file or a file that is not a recording.";
 
-  --csv FILE     steps as CSV, one row per step of every client (client_id column; units in
-                 the header; contacts_missing = 1: the step's frame was lost, written from
-                 its force alone)
-  --plots DIR    write force.png, contact_states.png, round_trip.png to DIR (needs
-                 /usr/bin/python3 with matplotlib; implies a CSV at DIR/steps.csv)
-  --help         this text
-  --version      the HapCo version and git revision, then exit
+struct Options {
+  std::string path, csv_path, plots_dir;
+};
 
-Exit code: 0 on success, 1 on a missing/unreadable file or a file that is not a recording.
-)";
+// Defines the command line (docs/cli.md) and parses it; false: --help/--version answered.
+bool Parse(int argc, char** argv, Options* options) {
+  hapco::cli::CommandLine command("hapco-report", "RECORDING [options]", kDescription, kFooter);
+  command.app()
+      .add_option("RECORDING", options->path, "a HapCo recording (proto/recording.proto)")
+      ->group("Arguments");  // checked after parsing: an unknown option is reported first
+  std::vector<std::string> more_recordings;  // refused below with a message of its own
+  command.app().add_option("MORE", more_recordings)->multi_option_policy(CLI::MultiOptionPolicy::TakeAll)->group("");
+  command.AddCsv(&options->csv_path,
+                 "steps as CSV, one row per step of every client (client_id column; units in the header; "
+                 "contacts_missing = 1: the step's frame was lost, written from its force alone)");
+  command.AddText("--plots", &options->plots_dir, "DIR",
+                  "write force.png, contact_states.png, round_trip.png to DIR (needs /usr/bin/python3 with "
+                  "matplotlib; implies a CSV at DIR/steps.csv unless --csv is given)",
+                  hapco::cli::kGroupOutput);
+  if (!command.Parse(argc, argv)) return false;
+  if (options->path.empty()) throw hapco::InputError("missing RECORDING argument (see --help)");
+  if (!more_recordings.empty()) throw hapco::InputError("only one recording is accepted (see --help)");
+  return true;
+}
 
 std::string Quote(const std::string& text) { return "'" + text + "'"; }
 
-int Run(int argc, char** argv) {
-  std::string path, csv_path, plots_dir;
-  for (int i = 1; i < argc; ++i) {
-    const std::string arg = argv[i];
-    if (arg == "--help" || arg == "-h") {
-      std::fputs(kUsage, stdout);
-      return 0;
-    } else if (arg == "--csv" && i + 1 < argc) {
-      csv_path = argv[++i];
-    } else if (arg == "--plots" && i + 1 < argc) {
-      plots_dir = argv[++i];
-    } else if (!arg.empty() && arg[0] == '-') {
-      throw hapco::InputError("unknown option or missing value: " + arg + " (see --help)");
-    } else if (path.empty()) {
-      path = arg;
-    } else {
-      throw hapco::InputError("only one recording is accepted (see --help)");
-    }
-  }
-  if (path.empty()) throw hapco::InputError("missing RECORDING argument (see --help)");
+int Run(const Options& options) {
+  const std::string& path = options.path;
+  std::string csv_path = options.csv_path;
+  const std::string& plots_dir = options.plots_dir;
   hapco::io::RecordingReadReport report;
   const auto records = hapco::io::ReadRecording(path, &report);
   std::printf("recording  %s: %s\n", path.c_str(), report.Summary().c_str());
@@ -220,5 +217,8 @@ int Run(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  return hapco::cli::RunMain("hapco-report", argc, argv, [&] { return Run(argc, argv); });
+  return hapco::cli::RunMain("hapco-report", [&] {
+    Options options;
+    return Parse(argc, argv, &options) ? Run(options) : 0;
+  });
 }

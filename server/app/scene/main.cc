@@ -4,11 +4,11 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
-#include <cstring>
 #include <string>
 #include <vector>
 
-#include "common/cli.h"
+#include "cli/command_line.h"
+#include "cli/run_main.h"
 #include "common/error.h"
 #include "common/memory.h"
 #include "common/timer.h"
@@ -19,19 +19,31 @@
 
 namespace {
 
-constexpr const char* kUsage = R"(usage: hapco-scene SCENE.txtpb [--no-compliance]
+constexpr const char* kDescription =
+    R"(Loads a HapCo scene file (proto/scene.proto), meshes both bodies, assembles and factors their stiffness once (CHOLMOD), builds exactly what hapco-sim and hapco-server precompute (the contact surfaces within contact.reach_m of the tool, the dense compliance among their nodes, the tool's unit fields) and prints sizes, costs, memory and sanity checks.)";
 
-Loads a HapCo scene file (proto/scene.proto), meshes both bodies, assembles and factors their
-stiffness once (CHOLMOD), builds exactly what hapco-sim and hapco-server precompute (the
-contact surfaces within contact.reach_m of the tool, the dense compliance among their nodes,
-the tool's unit fields) and prints sizes, costs, memory and sanity checks.
+constexpr const char* kFooter =
+    "Exit code: 0 on success, 1 on a bad scene (one line on stderr names file, line and field).";
 
-  --no-compliance   stop after the factorisations (faster on very fine meshes)
-  --help            this text
-  --version         the HapCo version and git revision, then exit
+struct Options {
+  std::string scene_path;
+  bool no_compliance = false;
+};
 
-Exit code: 0 on success, 1 on a bad scene (one line on stderr names file, line and field).
-)";
+// Defines the command line (docs/cli.md) and parses it; false: --help/--version answered.
+bool Parse(int argc, char** argv, Options* options) {
+  hapco::cli::CommandLine command("hapco-scene", "SCENE.txtpb [options]", kDescription, kFooter);
+  command.AddScene(&options->scene_path);
+  std::vector<std::string> more_scenes;  // refused below with a message of its own
+  command.app().add_option("MORE", more_scenes)->multi_option_policy(CLI::MultiOptionPolicy::TakeAll)->group("");
+  command.AddFlag("--no-compliance", &options->no_compliance,
+                  "stop after the factorisations: no contact surfaces, compliance or unit fields (faster on very "
+                  "fine meshes)",
+                  "Precomputation");
+  if (!command.Parse(argc, argv)) return false;
+  if (!more_scenes.empty()) throw hapco::InputError("only one scene file is accepted (see --help)");
+  return true;
+}
 
 const char* FaceName(hapco::fem::BoxFace face) {
   static const char* names[] = {"X_MIN", "X_MAX", "Y_MIN", "Y_MAX", "Z_MIN", "Z_MAX"};
@@ -65,25 +77,9 @@ void PrintBody(const char* role, const hapco::sim::BodySpec& spec,
               stats.factorization_seconds);
 }
 
-int Run(int argc, char** argv) {
-  std::string scene_path;
-  bool compliance = true;
-  for (int i = 1; i < argc; ++i) {
-    if (!std::strcmp(argv[i], "--help") || !std::strcmp(argv[i], "-h")) {
-      std::fputs(kUsage, stdout);
-      return 0;
-    } else if (!std::strcmp(argv[i], "--no-compliance")) {
-      compliance = false;
-    } else if (argv[i][0] == '-') {
-      throw hapco::InputError(std::string("unknown option ") + argv[i] + " (see --help)");
-    } else if (scene_path.empty()) {
-      scene_path = argv[i];
-    } else {
-      throw hapco::InputError("only one scene file is accepted (see --help)");
-    }
-  }
-  if (scene_path.empty()) throw hapco::InputError("missing SCENE argument (see --help)");
-
+int Run(const Options& options) {
+  const std::string& scene_path = options.scene_path;
+  const bool compliance = !options.no_compliance;
   hapco::Stopwatch total;
   const hapco::sim::SceneSpec scene = hapco::io::LoadSceneFile(scene_path);
   std::printf("scene     %s: %s\n", scene.name.c_str(), scene.description.c_str());
@@ -150,5 +146,8 @@ int Run(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  return hapco::cli::RunMain("hapco-scene", argc, argv, [&] { return Run(argc, argv); });
+  return hapco::cli::RunMain("hapco-scene", [&] {
+    Options options;
+    return Parse(argc, argv, &options) ? Run(options) : 0;
+  });
 }

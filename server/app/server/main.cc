@@ -11,7 +11,8 @@
 #include <string>
 #include <vector>
 
-#include "common/cli.h"
+#include "cli/command_line.h"
+#include "cli/run_main.h"
 #include "common/error.h"
 #include "common/realtime.h"
 #include "common/work_pool.h"
@@ -23,47 +24,13 @@
 
 namespace {
 
-constexpr const char* kUsage = R"(usage: hapco-server SCENE.txtpb [SCENE.txtpb ...] [options]
+constexpr const char* kDescription =
+    R"(Serves haptic sessions over DDS: every client publishes DevicePose samples ("hapco/pose", 1 kHz); the server runs one contact step per pose on the client's own session of SCENE and answers with a FeedbackForce on partition hapco/client/<id> (docs/dds-qos.md). A session opens on a SESSION_JOIN or on the client's first valid pose (so clients resume by themselves after a server restart); after a SESSION_LEAVE the client must join again.
+Several scenes: a SESSION_JOIN names its scene (the scene file's `name`; hapco-phantom sends the name in the scene file it was given); a session opened by a pose, or a JOIN without a name, gets the first scene; an unknown name is refused and logged with the served names.
+Bad input is counted and logged (at most one line per second per kind), never fatal; a client whose poses are ignored is told so in its force samples (FeedbackForce.pose_verdict). Guide: docs/haptic-service.md.)";
 
-Serves haptic sessions over DDS: every client publishes DevicePose samples ("hapco/pose",
-1 kHz); the server runs one contact step per pose on the client's own session of SCENE and
-answers with a FeedbackForce on partition hapco/client/<id> (docs/dds-qos.md). A session
-opens on a SESSION_JOIN or on the client's first valid pose (so clients resume by themselves
-after a server restart); after a SESSION_LEAVE the client must join again.
-Several scenes: a SESSION_JOIN names its scene (the scene file's `name`; hapco-phantom sends
-the name in the scene file it was given); a session opened by a pose, or a JOIN without a
-name, gets the first scene; an unknown name is refused and logged with the served names.
-Bad input is counted and logged (at most one line per second per kind), never fatal.
-Guide: docs/haptic-service.md.
-
-  --domain N          DDS domain id (default 0); the configuration comes from CYCLONEDDS_URI
-                      (loopback: CYCLONEDDS_URI=file://.../docker/cyclonedds-loopback.xml)
-  --status-period S   ServerStatus period, s (default 1)
-  --max-sessions N    open sessions at most (default 16); further clients are refused
-  --threads N         threads stepping sessions, the server thread included (default: one
-                      per online core); sessions that got a pose in the same tick are stepped
-                      in parallel, each worker publishing the force of the session it stepped
-  --physics P         contact (default) | none: the zero-cost floor for load tests (same
-                      DDS path, sessions and samples, no contact computation, zero force)
-  --max-jump-m X      largest plausible position change per pose, m (default 0.002);
-                      a larger jump is ignored (the client keeps its last force)
-  --workspace-m X     poses with |position| > X m are ignored (default 0.1)
-  --time-budget-ms X  solver wall-clock budget per step, ms (0 = none; default: the scene's
-                      solver.time_budget_s); a step out of time answers with the forces it has
-                      and status SOLVER_TIME_BUDGET_EXCEEDED
-  --scenes FILE       scene files listed in FILE, one path per line (# comments; relative
-                      paths are relative to FILE's folder), after those on the command line
-  --trace FILE        write one CSV row per step (client_id, sequence, position, force sent,
-                      step time) for debugging and tests
-  --rt-priority N     run the server thread (and DDS's threads) with SCHED_FIFO priority N
-                      (1..99; needs CAP_SYS_NICE; default 0 = normal policy)
-  --quiet             no log lines (the exit summary is still printed)
-  --help              this text
-  --version           the HapCo version and git revision, then exit
-
-SIGINT/SIGTERM: clean shutdown, exit code 0 and a one-line summary.
-Exit code: 0 after a clean shutdown, 1 on bad input (scene file, flags), 3 on a DDS failure.
-)";
+constexpr const char* kFooter = R"(SIGINT/SIGTERM: clean shutdown, exit code 0 and a one-line summary.
+Exit code: 0 after a clean shutdown, 1 on bad input (scene file, flags), 3 on a DDS failure.)";
 
 struct Options {
   std::vector<std::string> scene_paths;  // the first is the default scene
@@ -98,59 +65,64 @@ std::vector<std::string> ReadSceneList(const std::string& list_path) {
   return paths;
 }
 
-Options Parse(int argc, char** argv) {
-  Options options;
-  options.server.threads = hapco::WorkPool::DefaultThreads();
-  for (int i = 1; i < argc; ++i) {
-    const std::string arg = argv[i];
-    auto value = [&]() -> const char* {
-      if (i + 1 >= argc) throw hapco::InputError(arg + " needs a value (see --help)");
-      return argv[++i];
-    };
-    if (arg == "--help" || arg == "-h") {
-      std::fputs(kUsage, stdout);
-      std::exit(0);
-    } else if (arg == "--domain") {
-      options.domain = static_cast<int>(hapco::cli::ParseInteger("--domain", value(), 0, 230));
-    } else if (arg == "--status-period") {
-      options.server.status_period_s = hapco::cli::ParsePositive("--status-period", value());
-    } else if (arg == "--max-sessions") {
-      options.server.max_sessions = static_cast<int>(hapco::cli::ParseInteger("--max-sessions", value(), 1, 1000));
-    } else if (arg == "--threads") {
-      options.server.threads = static_cast<int>(hapco::cli::ParseInteger("--threads", value(), 1, 256));
-    } else if (arg == "--physics") {
-      const std::string physics = value();
-      if (physics == "contact") {
-        options.server.physics = hapco::service::SessionPhysics::kContact;
-      } else if (physics == "none") {
-        options.server.physics = hapco::service::SessionPhysics::kNone;
-      } else {
-        throw hapco::InputError("--physics expects contact or none, got '" + physics + "'");
-      }
-    } else if (arg == "--max-jump-m") {
-      options.server.limits.max_jump_m = hapco::cli::ParsePositive("--max-jump-m", value());
-    } else if (arg == "--workspace-m") {
-      options.server.limits.workspace_m = hapco::cli::ParsePositive("--workspace-m", value());
-    } else if (arg == "--rt-priority") {
-      options.rt_priority = static_cast<int>(hapco::cli::ParseInteger("--rt-priority", value(), 0, 99));
-    } else if (arg == "--time-budget-ms") {
-      const double ms = hapco::cli::ParseDouble("--time-budget-ms", value());
-      if (ms < 0) throw hapco::InputError("--time-budget-ms expects a number >= 0");
-      options.server.time_budget_s = ms * 1e-3;
-    } else if (arg == "--scenes") {
-      for (std::string& path : ReadSceneList(value())) options.scene_paths.push_back(std::move(path));
-    } else if (arg == "--trace") {
-      options.trace_path = value();
-    } else if (arg == "--quiet") {
-      options.server.log = false;
-    } else if (!arg.empty() && arg[0] == '-') {
-      throw hapco::InputError("unknown option " + arg + " (see --help)");
-    } else {
-      options.scene_paths.push_back(arg);
-    }
+// Defines the command line (docs/cli.md) and parses it; false: --help/--version answered.
+bool Parse(int argc, char** argv, Options* options) {
+  options->server.threads = hapco::WorkPool::DefaultThreads();
+  hapco::cli::CommandLine command("hapco-server", "SCENE.txtpb [SCENE.txtpb ...] [options]", kDescription, kFooter);
+  command.app()
+      .add_option("SCENE", options->scene_paths, "scene files; the first is the default scene")
+      ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll)
+      ->group("Arguments");
+  std::string scene_list;
+  command.AddText("--scenes", &scene_list, "FILE",
+                  "scene files listed in FILE, one path per line (# comments; relative paths are relative "
+                  "to FILE's folder), after those on the command line",
+                  "Arguments");
+  command.AddDomain(&options->domain);
+  command.AddNumber("--status-period-s", &options->server.status_period_s, "S",
+                    "ServerStatus period, s (default 1)", hapco::cli::kGroupDds, 0, HUGE_VAL, true);
+  command.AddInteger("--max-sessions", &options->server.max_sessions, "N",
+                     "open sessions at most (default 16); further clients are refused", "Sessions", 1, 1000);
+  command.AddInteger("--threads", &options->server.threads, "N",
+                     "threads stepping sessions, the server thread included (default: one per online core); "
+                     "sessions that got a pose in the same tick are stepped in parallel, each worker publishing "
+                     "the force of the session it stepped",
+                     "Sessions", 1, 256);
+  std::string physics = "contact";
+  command.AddChoice("--physics", &physics, {"contact", "none"},
+                    "contact (default), or none: the zero-cost floor for load tests (same DDS path, sessions and "
+                    "samples, no contact computation, zero force)",
+                    "Sessions");
+  command.AddMaxJump(&options->server.limits.max_jump_m,
+                     "largest plausible position change per pose, m (default 0.002); a larger jump is ignored "
+                     "(the client keeps its last force and is told)");
+  command.AddWorkspace(&options->server.limits.workspace_m,
+                       "poses with |position| > X m are ignored (default 0.1)");
+  double time_budget_ms = -1;
+  command.AddNumber("--time-budget-ms", &time_budget_ms, "X",
+                    "solver wall-clock budget per step, ms (0 = none; default: the scene's "
+                    "solver.time_budget_s); a step out of time answers with the forces it has and status "
+                    "SOLVER_TIME_BUDGET_EXCEEDED",
+                    "Solver", 0, HUGE_VAL);
+  command.AddText("--trace", &options->trace_path, "FILE",
+                  "write one CSV row per step (client_id, sequence, position, force sent, step time) for "
+                  "debugging and tests",
+                  hapco::cli::kGroupOutput);
+  command.AddRtPriority(&options->rt_priority, "the server thread");
+  bool quiet = false;
+  command.AddQuiet(&quiet, "no log lines (the exit summary is still printed)");
+  command.Deprecate("--status-period", "--status-period-s");
+  if (!command.Parse(argc, argv)) return false;
+
+  if (!scene_list.empty()) {
+    for (std::string& path : ReadSceneList(scene_list)) options->scene_paths.push_back(std::move(path));
   }
-  if (options.scene_paths.empty()) throw hapco::InputError("missing SCENE argument (see --help)");
-  return options;
+  if (options->scene_paths.empty()) throw hapco::InputError("missing SCENE argument (see --help)");
+  options->server.physics =
+      physics == "none" ? hapco::service::SessionPhysics::kNone : hapco::service::SessionPhysics::kContact;
+  if (time_budget_ms >= 0) options->server.time_budget_s = time_budget_ms * 1e-3;
+  options->server.log = !quiet;
+  return true;
 }
 
 int Run(const Options& options) {
@@ -198,5 +170,8 @@ int Run(const Options& options) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  return hapco::cli::RunMain("hapco-server", argc, argv, [&] { return Run(Parse(argc, argv)); });
+  return hapco::cli::RunMain("hapco-server", [&] {
+    Options options;
+    return Parse(argc, argv, &options) ? Run(options) : 0;
+  });
 }

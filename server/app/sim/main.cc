@@ -1,5 +1,6 @@
 // hapco-sim: runs a scene's device trajectory offline (no network) through the haptic step
 // pipeline and writes one CSV row per step. Thin: the work is in hapco::sim.
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -11,9 +12,11 @@
 #include <map>
 #include <optional>
 #include <string>
+#include <vector>
 #include <unistd.h>
 
-#include "common/cli.h"
+#include "cli/command_line.h"
+#include "cli/run_main.h"
 #include "common/error.h"
 #ifdef HAPCO_HAVE_FCLIB
 #include "fclib/fclib_io.h"
@@ -29,50 +32,15 @@
 
 namespace {
 
-constexpr const char* kUsage = R"(usage: hapco-sim SCENE.txtpb [options]
+constexpr const char* kDescription =
+    R"(Runs the scene's device trajectory (the paper's five phases, or the poses of a --trajectory file) offline, without a network, through the haptic step pipeline of hapco-server: collision detection, flexibility operator, frictional contact solve, force on the device. Prints a summary; --csv, --output, --vtk and --fclib write what each step did. Solver options not given take the scene file's values.)";
 
-Runs the scene's trajectory (the paper's five phases) through the contact pipeline: collision
-detection, flexibility operator, frictional contact solve, force on the device.
-
-  --solver NAME     local-uzawa | global-uzawa-gs | global-uzawa-jacobi | reference
-                    (default: the scene's solver). global-uzawa-jacobi is the De Saxce fixed
-                    point for stability studies: with the paper's rho it does not converge on
-                    the shipped meshes (docs/contact-benchmark.md)
-  --tol X           the paper's stop test ||dr||/rho < X, in m (default: the scene's)
-  --mu X            Coulomb friction coefficient (default: the scene's)
-  --max-iter N      outer iteration cap (default: the scene's)
-  --rho-scale X     multiply the paper's rho by X (stability studies; default 1)
-  --cold            start every step from r = 0 (the paper), not from the last forces
-  --mode MODE       precomputed (default; per-scene compliance, O(contacts) per step) or
-                    full (the paper's per-step sparse solves; slow, the reference)
-  --steps N         stop after N steps (default: the whole trajectory)
-  --trajectory FILE step k moves the tool to row k of FILE instead of the scene's phases: a
-                    CSV with columns x_m,y_m,z_m (hapco-server --trace) or dx_m,dy_m,dz_m
-                    (hapco-sim --csv, hapco-report --csv), found by header name
-  --client ID       with --trajectory: the rows of that client_id (files of several clients)
-  --workspace-m X   poses with |position| > X m are ignored, as by hapco-server (default 0.1)
-  --max-jump-m X    a pose farther than X m from the last stepped one (x the sequence gap, at
-                    most 10) is ignored, as by hapco-server (default 0.002)
-  --csv FILE        one row per step (see the header line for columns and units)
-  --vtk DIR         write ParaView files to DIR: deformed bodies and contact points every
-                    --vtk-every steps (default 10) and at the last step; open DIR/hapco.pvd
-  --vtk-every N     VTK output period in steps
-  --record FILE     write a HapCo recording (header with the scene, one record per step with
-                    forces, contact states and timings); read it with hapco-report
-  --fclib DIR       write the contact problem of every --fclib-every-th step with contacts,
-                    and of every step that did not converge, as FCLIB files for other solvers:
-                    DIR/step_NNNNNN_local.hdf5 (W, q, mu) and DIR/step_NNNNNN_global.hdf5
-                    (M = both bodies' K_ff, H = contact Jacobian, f, w); solve with hapco-solve
-  --fclib-every N   FCLIB export period in steps (default 10)
-  --quiet           no progress line
-  --help            this text
-  --version         the HapCo version and git revision, then exit
-
-Exit code: 0 when every step converged, 2 when some did not (the run completes), 1 on bad input.
-)";
+constexpr const char* kFooter =
+    "Exit code: 0 when every step converged, 2 when some did not (the run completes), 1 on bad input.";
 
 struct Options {
-  std::string scene_path, csv_path, vtk_dir, record_path, solver_name, mode = "precomputed", trajectory_path, client_id;
+  std::string scene_path, csv_path, vtk_dir, output_path, solver_name, compliance = "precomputed", trajectory_path,
+      client_id;
   hapco::sim::PoseLimits limits;
   double tolerance_m = 0, friction = -1, rho_scale = 1;
   std::string fclib_dir;
@@ -80,76 +48,78 @@ struct Options {
   bool cold = false, quiet = false;
 };
 
-Options Parse(int argc, char** argv) {
-  Options options;
-  for (int i = 1; i < argc; ++i) {
-    const std::string arg = argv[i];
-    auto value = [&]() -> const char* {
-      if (i + 1 >= argc) throw hapco::InputError(arg + " needs a value (see --help)");
-      return argv[++i];
-    };
-    if (arg == "--help" || arg == "-h") {
-      std::fputs(kUsage, stdout);
-      std::exit(0);
-    } else if (arg == "--solver") {
-      options.solver_name = value();
-    } else if (arg == "--tol") {
-      options.tolerance_m = hapco::cli::ParseDouble("--tol", value());
-      if (options.tolerance_m <= 0) throw hapco::InputError("--tol must be > 0 m");
-    } else if (arg == "--mu") {
-      options.friction = hapco::cli::ParseDouble("--mu", value());
-      if (!(options.friction >= 0) || options.friction > hapco::sim::kMaxFrictionCoefficient) {
-        char message[128];
-        std::snprintf(message, sizeof message, "--mu must be in [0, %g] as in a scene file, got %g",
-                      hapco::sim::kMaxFrictionCoefficient, options.friction);
-        throw hapco::InputError(message);
-      }
-    } else if (arg == "--max-iter") {
-      options.max_iterations = static_cast<int>(hapco::cli::ParseInteger("--max-iter", value(), 1, 100000000));
-    } else if (arg == "--rho-scale") {
-      options.rho_scale = hapco::cli::ParseDouble("--rho-scale", value());
-      if (options.rho_scale <= 0) throw hapco::InputError("--rho-scale must be > 0");
-    } else if (arg == "--cold") {
-      options.cold = true;
-    } else if (arg == "--mode") {
-      options.mode = value();
-      if (options.mode != "precomputed" && options.mode != "full") {
-        throw hapco::InputError("--mode must be precomputed or full, got '" + options.mode + "'");
-      }
-    } else if (arg == "--trajectory") {
-      options.trajectory_path = value();
-    } else if (arg == "--client") {
-      options.client_id = value();
-    } else if (arg == "--workspace-m") {
-      options.limits.workspace_m = hapco::cli::ParsePositive("--workspace-m", value());
-    } else if (arg == "--max-jump-m") {
-      options.limits.max_jump_m = hapco::cli::ParsePositive("--max-jump-m", value());
-    } else if (arg == "--steps") {
-      options.steps = static_cast<int>(hapco::cli::ParseInteger("--steps", value(), 1, 100000000));
-    } else if (arg == "--csv") {
-      options.csv_path = value();
-    } else if (arg == "--record") {
-      options.record_path = value();
-    } else if (arg == "--vtk") {
-      options.vtk_dir = value();
-    } else if (arg == "--vtk-every") {
-      options.vtk_every = static_cast<int>(hapco::cli::ParseInteger("--vtk-every", value(), 1, 100000000));
-    } else if (arg == "--fclib") {
-      options.fclib_dir = value();
-    } else if (arg == "--fclib-every") {
-      options.fclib_every = static_cast<int>(hapco::cli::ParseInteger("--fclib-every", value(), 1, 100000000));
-    } else if (arg == "--quiet") {
-      options.quiet = true;
-    } else if (!arg.empty() && arg[0] == '-') {
-      throw hapco::InputError("unknown option " + arg + " (see --help)");
-    } else if (options.scene_path.empty()) {
-      options.scene_path = arg;
-    } else {
-      throw hapco::InputError("only one scene file is accepted (see --help)");
-    }
+// Defines the command line (docs/cli.md) and parses it; false: --help/--version answered.
+bool Parse(int argc, char** argv, Options* options) {
+  hapco::cli::CommandLine command("hapco-sim", "SCENE.txtpb [options]", kDescription, kFooter);
+  command.AddScene(&options->scene_path);
+  std::vector<std::string> more_scenes;  // refused below with a message of its own
+  command.app().add_option("MORE", more_scenes)->multi_option_policy(CLI::MultiOptionPolicy::TakeAll)->group("");
+  command.AddSolver(&options->solver_name, "the scene's solver");
+  command.AddNumber("--paper-tol-m", &options->tolerance_m, "X",
+                    "the paper's stop test ||dr||/rho < X, m (default: the scene's solver.global_tolerance_m)",
+                    "Solver", 0, HUGE_VAL, true);
+  // The range of a scene file's friction_coefficient, checked after parsing with its own message.
+  char mu_help[128];
+  std::snprintf(mu_help, sizeof mu_help,
+                "Coulomb friction coefficient, dimensionless, in [0, %g] as in a scene file (default: the scene's)",
+                hapco::sim::kMaxFrictionCoefficient);
+  CLI::Option* mu = command.AddNumber("--mu", &options->friction, "X", mu_help, "Solver", -HUGE_VAL, HUGE_VAL);
+  command.AddMaxIterations(&options->max_iterations, "the scene's");
+  command.AddNumber("--rho-scale", &options->rho_scale, "X",
+                    "multiply the paper's rho by X (stability studies; default 1)", "Solver", 0, HUGE_VAL, true);
+  command.AddFlag("--cold", &options->cold, "start every step from r = 0 (the paper), not from the last forces",
+                  "Solver");
+  command.AddChoice("--compliance", &options->compliance, {"precomputed", "full"},
+                    "precomputed (default; the compliance among the scene's contact candidates, computed once: "
+                    "O(contacts) per step) or full (the paper's per-step sparse solves; slow, the reference)",
+                    "Solver");
+  command.AddInteger("--steps", &options->steps, "N", "stop after N steps (default: the whole trajectory)", "Run",
+                     1, 100000000);
+  command.AddText("--trajectory", &options->trajectory_path, "FILE",
+                  "step k moves the tool to row k of FILE instead of the scene's phases: a CSV with columns "
+                  "x_m,y_m,z_m (hapco-server --trace) or dx_m,dy_m,dz_m (hapco-sim --csv, hapco-report --csv), "
+                  "found by header name",
+                  "Run");
+  command.AddText("--client-id", &options->client_id, "ID",
+                  "with --trajectory: the rows of that client_id (files of several clients)", "Run");
+  command.AddWorkspace(&options->limits.workspace_m,
+                       "poses with |position| > X m are ignored, as by hapco-server (default 0.1)");
+  command.AddMaxJump(&options->limits.max_jump_m,
+                     "a pose farther than X m from the last stepped one (x the sequence gap, at most 10) is "
+                     "ignored, as by hapco-server (default 0.002)");
+  command.AddOutput(&options->output_path,
+                    "write a HapCo recording: a header with the scene, one record per step with forces, contact "
+                    "states and timings; read it with hapco-report");
+  command.AddCsv(&options->csv_path, "one row per step (see the header line for columns and units)");
+  command.AddText("--vtk", &options->vtk_dir, "DIR",
+                  "write ParaView files to DIR: deformed bodies and contact points every --vtk-every steps and at "
+                  "the last step; open DIR/hapco.pvd",
+                  hapco::cli::kGroupOutput);
+  command.AddInteger("--vtk-every", &options->vtk_every, "N", "VTK output period in steps (default 10)",
+                     hapco::cli::kGroupOutput, 1, 100000000);
+  command.AddText("--fclib", &options->fclib_dir, "DIR",
+                  "write the contact problem of every --fclib-every-th step with contacts, and of every step that "
+                  "did not converge, as FCLIB files for other solvers: DIR/step_NNNNNN_local.hdf5 (W, q, mu) and "
+                  "DIR/step_NNNNNN_global.hdf5 (M = both bodies' K_ff, H = contact Jacobian, f, w); solve them "
+                  "with hapco-solve",
+                  hapco::cli::kGroupOutput);
+  command.AddInteger("--fclib-every", &options->fclib_every, "N", "FCLIB export period in steps (default 10)",
+                     hapco::cli::kGroupOutput, 1, 100000000);
+  command.AddQuiet(&options->quiet, "no progress line");
+  command.Deprecate("--record", "--output");
+  command.Deprecate("--tol", "--paper-tol-m");
+  command.Deprecate("--client", "--client-id");
+  command.Deprecate("--mode", "--compliance");
+  if (!command.Parse(argc, argv)) return false;
+
+  if (!more_scenes.empty()) throw hapco::InputError("only one scene file is accepted (see --help)");
+  if (mu->count() > 0 && !(options->friction >= 0 && options->friction <= hapco::sim::kMaxFrictionCoefficient)) {
+    char message[128];
+    std::snprintf(message, sizeof message, "--mu must be in [0, %g] as in a scene file, got %g",
+                  hapco::sim::kMaxFrictionCoefficient, options->friction);
+    throw hapco::InputError(message);
   }
-  if (options.scene_path.empty()) throw hapco::InputError("missing SCENE argument (see --help)");
-  return options;
+  return true;
 }
 
 // Writes the step's contact problem as a local and a global FCLIB file; returns the number of
@@ -289,7 +259,7 @@ int Run(const Options& options) {
   scene.solver_parameters.rho_scale = options.rho_scale;
   if (options.cold) scene.solver_parameters.warm_start = false;
 
-  PendingOutput csv_output(options.csv_path, false), record_output(options.record_path, true);
+  PendingOutput csv_output(options.csv_path, false), record_output(options.output_path, true);
   std::FILE* csv = nullptr;
   if (!options.csv_path.empty()) {
     csv = std::fopen(csv_output.partial().c_str(), "w");
@@ -310,18 +280,18 @@ int Run(const Options& options) {
     std::printf("note: %s\n", note.c_str());
   }
   hapco::sim::TwoBodySession session(
-      model, options.mode == "full" ? hapco::sim::SolveMode::kFullSolve : hapco::sim::SolveMode::kPrecomputed);
-  std::printf("solver %s, tolerance %.3g m, mu %.3g, %s start, mode %s\n",
+      model, options.compliance == "full" ? hapco::sim::SolveMode::kFullSolve : hapco::sim::SolveMode::kPrecomputed);
+  std::printf("solver %s, tolerance %.3g m, mu %.3g, %s start, compliance %s\n",
               std::string(hapco::contact::SolverName(session.solver)).c_str(),
               session.parameters.global_tolerance_m, scene.friction_coefficient,
-              session.parameters.warm_start ? "warm" : "cold", options.mode.c_str());
+              session.parameters.warm_start ? "warm" : "cold", options.compliance.c_str());
   if (csv != nullptr) {
     std::fprintf(csv, "step,phase,dx_m,dy_m,dz_m,fx_n,fy_n,fz_n,device_fx_n,device_fy_n,device_fz_n,"
                       "contacts,separating,sticking,sliding,outer_iterations,inner_iterations,"
                       "detect_s,assemble_s,solve_s,update_s,step_s,fc3d_error,paper_error_m,status\n");
   }
   std::unique_ptr<hapco::io::RecordingWriter> recorder;
-  if (!options.record_path.empty()) {
+  if (!options.output_path.empty()) {
     hapco::recording::Header header;
     header.set_format_version(1);
     header.set_hapco_version(HAPCO_VERSION);
@@ -413,7 +383,7 @@ int Run(const Options& options) {
     const long long records = static_cast<long long>(recorder->records_written());
     recorder.reset();  // closes the file
     record_output.Commit();
-    std::printf("recording: %s (%lld records)\n", options.record_path.c_str(), records);
+    std::printf("recording: %s (%lld records)\n", options.output_path.c_str(), records);
   }
   if (collection) std::printf("ParaView: open %s/hapco.pvd\n", options.vtk_dir.c_str());
   if (!options.fclib_dir.empty()) {
@@ -437,5 +407,8 @@ int Run(const Options& options) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  return hapco::cli::RunMain("hapco-sim", argc, argv, [&] { return Run(Parse(argc, argv)); });
+  return hapco::cli::RunMain("hapco-sim", [&] {
+    Options options;
+    return Parse(argc, argv, &options) ? Run(options) : 0;
+  });
 }

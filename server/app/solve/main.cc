@@ -3,16 +3,15 @@
 // (design.md, example 14).
 #include <algorithm>
 #include <array>
-#include <charconv>
+#include <cmath>
 #include <cstdio>
-#include <exception>
 #include <limits>
 #include <optional>
 #include <string>
-#include <string_view>
-#include <system_error>
+#include <vector>
 
-#include "common/cli.h"
+#include "cli/command_line.h"
+#include "cli/run_main.h"
 #include "common/error.h"
 #include "common/memory.h"
 #include "contact/global_problem.h"
@@ -24,47 +23,20 @@
 namespace {
 
 constexpr int kExitConverged = 0;
-constexpr int kExitBadInput = 1;
 constexpr int kExitNotConverged = 2;
 
-constexpr const char* kUsage = R"(usage: hapco-solve PROBLEM.hdf5 [options]
+constexpr const char* kDescription =
+    R"(Reads a local friction-contact problem u = W r + q (FCLIB file, /fclib_local: W, q, mu; spacedim 3; W in compressed columns, compressed rows or triplets, as Siconos or libfclib write it), solves it and prints: the file, the number of contacts, the mu range, the solver, its status, outer/inner iterations, time, the fc3d error, the paper error, libfclib's merit and the number of contacts separating/sticking/sliding (r_n resp. the slip ||u_t|| compared with 100 * tol * max(||q||, ||r||, ||u||)).
 
-Reads a local friction-contact problem u = W r + q (FCLIB file, /fclib_local: W, q, mu;
-spacedim 3; W in compressed columns, compressed rows or triplets, as Siconos or libfclib
-write it), solves it and prints: the file, the number of contacts, the mu range, the solver,
-its status, outer/inner iterations, time, the fc3d error, the paper error, libfclib's merit
-and the number of contacts separating/sticking/sliding (r_n resp. the slip ||u_t|| compared
-with 100 * tol * max(||q||, ||r||, ||u||)).
+A W symmetric only up to round-off (max|W - W^T| / max|W| <= 1e-4, printed) is solved with its symmetric part, then refined on the stored W, and every error is reported on the stored W.
 
-A W symmetric only up to round-off (max|W - W^T| / max|W| <= 1e-4, printed) is solved with
-its symmetric part, then refined on the stored W, and every error is reported on the stored W.
+A global problem (/fclib_global: M v = H r + f, u = H^T v + w, as fclib.h defines it; no equality constraints G, b) is reduced to the local one by the flexibility method: M factored once with CHOLMOD, W = H^T M^-1 H, q = H^T M^-1 f + w (time and memory printed); after the solve v = M^-1 (H r + f), and the global residual (momentum balance ||M v - H r - f|| and the cone complementarity of u = H^T v + w) is computed from M, H, f, w directly.
 
-A global problem (/fclib_global: M v = H r + f, u = H^T v + w, as fclib.h defines it; no
-equality constraints G, b) is reduced to the local one by the flexibility method: M factored
-once with CHOLMOD, W = H^T M^-1 H, q = H^T M^-1 f + w (time and memory printed); after the
-solve v = M^-1 (H r + f), and the global residual (momentum balance ||M v - H r - f|| and the
-cone complementarity of u = H^T v + w) is computed from M, H, f, w directly.
+If PROBLEM.hdf5 already holds a /solution, its fc3d error is printed too.)";
 
-  --solver NAME     local-uzawa | global-uzawa-gs | global-uzawa-jacobi | reference
-                    (default: reference, Gauss-Seidel with an exact local solve)
-  --tol X           fc3d tolerance, dimensionless (default 1e-8): stop when
-                    ||r - Proj_K(r - (u + mu||u_t||n))|| / max(||q||, ||r||, ||u||) < X
-  --paper-tol X     also stop when the paper's test ||r(k+1) - r(k)|| / rho < X, in the
-                    units of W*r (m for HapCo problems) (default: off)
-  --local-tol X     inner tolerance of local-uzawa, ||dr_alpha|| / rho < X, same units
-                    (default 1e-8)
-  --max-iter N      cap on outer iterations (sweeps), N >= 1 (default 1000)
-  --out FILE.hdf5   write a copy of the problem (matrices in compressed columns) with the
-                    solution in its FCLIB /solution group: r, u (and v for a global
-                    problem); also when not converged
-  --help            this text
-  --version         the HapCo version and git revision, then exit
-
-If PROBLEM.hdf5 already holds a /solution, its fc3d error is printed too.
-
-Exit code: 0 converged, 2 not converged (max-iterations, time-budget-exceeded or diverged;
-the report is still printed), 1 bad input (one line on stderr says what to fix).
-)";
+constexpr const char* kFooter =
+    "Exit code: 0 converged, 2 not converged (max-iterations, time-budget-exceeded or diverged; the report is "
+    "still printed), 1 bad input (one line on stderr says what to fix).";
 
 struct Options {
   std::string problem_path;
@@ -74,71 +46,50 @@ struct Options {
   std::optional<double> paper_tolerance;
   double local_tolerance = 1e-8;
   int max_iterations = 1000;
-  bool help = false;
 };
 
-double ParsePositive(std::string_view flag, std::string_view text) {
-  double value = 0.0;
-  const auto [end, error] = std::from_chars(text.data(), text.data() + text.size(), value);
-  if (error != std::errc() || end != text.data() + text.size() || !(value > 0.0) ||
-      value == std::numeric_limits<double>::infinity()) {
-    throw hapco::InputError(std::string(flag) + " needs a positive number, got '" +
-                            std::string(text) + "'");
-  }
-  return value;
-}
+// Defines the command line (docs/cli.md) and parses it; false: --help/--version answered.
+bool Parse(int argc, char** argv, Options* options) {
+  hapco::cli::CommandLine command("hapco-solve", "PROBLEM.hdf5 [options]", kDescription, kFooter);
+  command.app()
+      .add_option("PROBLEM", options->problem_path, "FCLIB file with a local (/fclib_local) or global "
+                                                    "(/fclib_global) friction-contact problem")
+      ->group("Arguments");  // checked after parsing: an unknown option is reported first
+  std::vector<std::string> more_problems;  // refused below with a message of its own
+  command.app().add_option("MORE", more_problems)->multi_option_policy(CLI::MultiOptionPolicy::TakeAll)->group("");
+  std::string solver = "reference";
+  command.AddSolver(&solver, "reference, Gauss-Seidel with an exact local solve");
+  command.AddNumber("--tol", &options->fc3d_tolerance, "X",
+                    "fc3d tolerance, dimensionless (default 1e-8): stop when\n"
+                    "  ||r - Proj_K(r - (u + mu||u_t||n))|| / max(||q||, ||r||, ||u||) < X",
+                    "Solver", 0, HUGE_VAL, true);
+  double paper_tolerance = 0;
+  CLI::Option* paper = command.AddNumber(
+      "--paper-tol-m", &paper_tolerance, "X",
+      "also stop when the paper's test ||r(k+1) - r(k)|| / rho < X, in the units of W r (m for HapCo "
+      "problems) (default: off)",
+      "Solver", 0, HUGE_VAL, true);
+  command.AddNumber("--local-tol-m", &options->local_tolerance, "X",
+                    "inner tolerance of local-uzawa, ||dr_alpha|| / rho < X, same units (default 1e-8)", "Solver", 0,
+                    HUGE_VAL, true);
+  command.AddMaxIterations(&options->max_iterations, "1000");
+  command.AddOutput(&options->out_path,
+                    "write a copy of the problem (matrices in compressed columns) with the solution in its FCLIB "
+                    "/solution group: r, u (and v for a global problem); also when not converged");
+  command.Deprecate("--out", "--output");
+  command.Deprecate("--paper-tol", "--paper-tol-m");
+  command.Deprecate("--local-tol", "--local-tol-m");
+  if (!command.Parse(argc, argv)) return false;
 
-int ParseCount(std::string_view flag, std::string_view text) {
-  int value = 0;
-  const auto [end, error] = std::from_chars(text.data(), text.data() + text.size(), value);
-  if (error != std::errc() || end != text.data() + text.size() || value < 1) {
-    throw hapco::InputError(std::string(flag) + " needs an integer >= 1, got '" +
-                            std::string(text) + "'");
-  }
-  return value;
-}
-
-Options ParseOptions(int argc, char** argv) {
-  Options options;
-  for (int k = 1; k < argc; ++k) {
-    const std::string_view arg = argv[k];
-    if (arg == "--help" || arg == "-h") {
-      options.help = true;
-      return options;
-    }
-    if (arg.starts_with("--")) {
-      static constexpr std::array<std::string_view, 6> kWithValue = {"--solver", "--tol", "--paper-tol",
-                                                                      "--local-tol", "--max-iter", "--out"};
-      if (std::find(kWithValue.begin(), kWithValue.end(), arg) == kWithValue.end()) {
-        throw hapco::InputError("unknown option " + std::string(arg) + " (see --help)");
-      }
-      if (k + 1 >= argc) throw hapco::InputError(std::string(arg) + " needs a value");
-      const std::string_view value = argv[++k];
-      if (arg == "--solver") {
-        options.solver = hapco::contact::ParseSolverKind(value);
-      } else if (arg == "--tol") {
-        options.fc3d_tolerance = ParsePositive(arg, value);
-      } else if (arg == "--paper-tol") {
-        options.paper_tolerance = ParsePositive(arg, value);
-      } else if (arg == "--local-tol") {
-        options.local_tolerance = ParsePositive(arg, value);
-      } else if (arg == "--max-iter") {
-        options.max_iterations = ParseCount(arg, value);
-      } else if (arg == "--out") {
-        options.out_path = std::string(value);
-      } else {
-        throw hapco::InputError("unknown option " + std::string(arg) + " (see --help)");
-      }
-    } else if (options.problem_path.empty()) {
-      options.problem_path = std::string(arg);
-    } else {
-      throw hapco::InputError("one problem file only; unexpected '" + std::string(arg) + "'");
-    }
-  }
-  if (options.problem_path.empty()) {
+  if (options->problem_path.empty()) {
     throw hapco::InputError("no problem file given (usage: hapco-solve PROBLEM.hdf5, see --help)");
   }
-  return options;
+  if (!more_problems.empty()) {
+    throw hapco::InputError("one problem file only; unexpected '" + more_problems.front() + "'");
+  }
+  options->solver = hapco::contact::ParseSolverKind(solver);
+  if (paper->count() > 0) options->paper_tolerance = paper_tolerance;
+  return true;
 }
 
 namespace contact = hapco::contact;
@@ -319,22 +270,8 @@ int Run(const Options& options) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  if (hapco::cli::AsksForVersion(argc, argv)) {
-    std::printf("%s\n", hapco::cli::VersionLine("hapco-solve").c_str());
-    return kExitConverged;
-  }
-  try {
-    const Options options = ParseOptions(argc, argv);
-    if (options.help) {
-      std::fputs(kUsage, stdout);
-      return kExitConverged;
-    }
-    return Run(options);
-  } catch (const hapco::InputError& error) {
-    std::fprintf(stderr, "hapco-solve: %s\n", error.what());
-    return kExitBadInput;
-  } catch (const std::exception& error) {
-    std::fprintf(stderr, "hapco-solve: unexpected error: %s\n", error.what());
-    return kExitBadInput;
-  }
+  return hapco::cli::RunMain("hapco-solve", [&] {
+    Options options;
+    return Parse(argc, argv, &options) ? Run(options) : kExitConverged;
+  });
 }

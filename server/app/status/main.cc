@@ -6,31 +6,21 @@
 #include <dds/dds.h>
 
 #include <cinttypes>
+#include <cmath>
 #include <cstdio>
-#include <cstdlib>
 #include <string>
 
-#include "common/cli.h"
+#include "cli/command_line.h"
+#include "cli/run_main.h"
 #include "common/error.h"
 #include "service/dds.h"
 
 namespace {
 
-constexpr const char* kUsage = R"(usage: hapco-status [options]
+constexpr const char* kDescription =
+    R"(Waits for a hapco-server's ServerStatus (topic "hapco/status", transient-local: a running server's last status arrives at once), prints it and exits 0. The container HEALTHCHECK runs it (docs/container.md).)";
 
-Waits for a hapco-server's ServerStatus (topic "hapco/status"), prints it, exits 0.
-
-  --domain N          DDS domain id (default 0); configuration from CYCLONEDDS_URI
-  --timeout-s S       give up after S seconds: exit 1 (default 5)
-  --max-age-s S       accept only a status published less than S seconds ago (default: any);
-                      the server publishes one every --status-period (default 1 s)
-  --server-id ID      accept only the server with this id (default: any)
-  --quiet             print nothing on success
-  --help              this text
-  --version           the HapCo version and git revision, then exit
-
-Exit code: 0 status received, 1 none in time (or bad flags), 3 DDS failure.
-)";
+constexpr const char* kFooter = "Exit code: 0 status received, 1 none in time (or bad flags), 3 DDS failure.";
 
 struct Options {
   int domain = 0;
@@ -39,32 +29,20 @@ struct Options {
   bool quiet = false;
 };
 
-Options Parse(int argc, char** argv) {
-  Options o;
-  for (int i = 1; i < argc; ++i) {
-    const std::string arg = argv[i];
-    auto value = [&]() -> const char* {
-      if (i + 1 >= argc) throw hapco::InputError(arg + " needs a value (see --help)");
-      return argv[++i];
-    };
-    if (arg == "--help" || arg == "-h") {
-      std::fputs(kUsage, stdout);
-      std::exit(0);
-    } else if (arg == "--domain") {
-      o.domain = static_cast<int>(hapco::cli::ParseInteger("--domain", value(), 0, 230));
-    } else if (arg == "--timeout-s") {
-      o.timeout_s = hapco::cli::ParsePositive("--timeout-s", value());
-    } else if (arg == "--max-age-s") {
-      o.max_age_s = hapco::cli::ParsePositive("--max-age-s", value());
-    } else if (arg == "--server-id") {
-      o.server_id = value();
-    } else if (arg == "--quiet") {
-      o.quiet = true;
-    } else {
-      throw hapco::InputError("unknown argument " + arg + " (see --help)");
-    }
-  }
-  return o;
+// Defines the command line (docs/cli.md) and parses it; false: --help/--version answered.
+bool Parse(int argc, char** argv, Options* o) {
+  hapco::cli::CommandLine command("hapco-status", "[options]", kDescription, kFooter);
+  command.AddDomain(&o->domain);
+  command.AddConnectTimeout(&o->timeout_s, "give up after S seconds: exit 1 (default 5)");
+  command.AddNumber("--max-age-s", &o->max_age_s, "S",
+                    "accept only a status published less than S seconds ago (default: any); the server publishes "
+                    "one every --status-period-s (default 1 s)",
+                    "Checks", 0, HUGE_VAL, true);
+  command.AddText("--server-id", &o->server_id, "ID", "accept only the server with this id (default: any)",
+                  "Checks");
+  command.AddQuiet(&o->quiet, "print nothing on success");
+  command.Deprecate("--timeout-s", "--connect-timeout-s");
+  return command.Parse(argc, argv);
 }
 
 dds_duration_t Seconds(double s) { return static_cast<dds_duration_t>(s * 1e9); }
@@ -112,5 +90,8 @@ int Run(const Options& o) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  return hapco::cli::RunMain("hapco-status", argc, argv, [&] { return Run(Parse(argc, argv)); });
+  return hapco::cli::RunMain("hapco-status", [&] {
+    Options options;
+    return Parse(argc, argv, &options) ? Run(options) : 0;
+  });
 }

@@ -27,10 +27,10 @@ double Num(const std::map<std::string, std::string>& row, const char* key) { ret
 TEST(LoadTestProcess, TwoClientsOnLoopbackKeepTheReportInvariants) {
   const std::string dir = TestDir();
   const std::string domain = std::to_string(SetUpTestDomain());
-  Process server({HAPCO_SERVER_EXE, kScene, "--domain", domain, "--status-period", "0.2", "--rt-priority", "80", "--quiet"},
+  Process server({HAPCO_SERVER_EXE, kScene, "--domain", domain, "--status-period-s", "0.2", "--rt-priority", "80", "--quiet"},
                  dir + "/server.out", dir + "/server.err");
   {
-    Process loadtest({HAPCO_LOADTEST_EXE, kScene, "--clients", "2", "--duration", "3", "--domain", domain,
+    Process loadtest({HAPCO_LOADTEST_EXE, kScene, "--clients", "2", "--duration-s", "3", "--domain", domain,
                       "--trajectory-loop", "--client-prefix", "it", "--csv-dir", dir, "--rt-priority", "80",
                       "--connect-timeout-s", "60"},
                      dir + "/loadtest.out", dir + "/loadtest.err");
@@ -122,12 +122,12 @@ TEST(LoadTestProcess, NoServerExitsWithCode2AndBadInputWith1) {
   const std::string dir = TestDir();
   const std::string domain = std::to_string(SetUpTestDomain());
   {
-    Process loadtest({HAPCO_LOADTEST_EXE, kScene, "--clients", "1", "--duration", "1", "--domain", domain,
+    Process loadtest({HAPCO_LOADTEST_EXE, kScene, "--clients", "1", "--duration-s", "1", "--domain", domain,
                       "--connect-timeout-s", "0.5"},
                      dir + "/none.out", dir + "/none.err");
     EXPECT_EQ(loadtest.Wait(60'000), 2) << ReadFile(dir + "/none.err");
   }
-  Process bad({HAPCO_LOADTEST_EXE, kScene, "--clients", "0", "--duration", "1"}, dir + "/bad.out", dir + "/bad.err");
+  Process bad({HAPCO_LOADTEST_EXE, kScene, "--clients", "0", "--duration-s", "1"}, dir + "/bad.out", dir + "/bad.err");
   EXPECT_EQ(bad.Wait(60'000), 1);
   EXPECT_NE(ReadFile(dir + "/bad.err").find("--clients"), std::string::npos) << ReadFile(dir + "/bad.err");
 }

@@ -24,7 +24,7 @@ namespace {
 const std::string kScene = std::string(HAPCO_SOURCE_DIR) + "/tests/data/scenes/coarse.txtpb";
 const std::string kNetlab = std::string(HAPCO_SOURCE_DIR) + "/scripts/netlab";
 constexpr double kMaxForceN = 7.9, kMaxChangeN = 0.25;  // phantom.h SafetyParameters
-constexpr double kTimeoutS = 0.050;                      // hapco-loadtest --timeout-ms default
+constexpr double kTimeoutS = 0.050;                      // hapco-loadtest --force-timeout-ms default
 // Time from the timeout to zero force: the ramp lasts 20 ms, but its step is also held to the
 // rate limit, so from 7.9 N it takes 7.9 / 0.25 = 32 ticks.
 constexpr double kRampS = 0.032;
@@ -54,7 +54,7 @@ int RunLab(const std::string& dir, const std::string& tag, const std::vector<std
 
 std::vector<std::string> LoadTest(const std::string& out_dir, const std::string& domain, const char* seconds) {
   std::filesystem::create_directories(out_dir);
-  return {HAPCO_LOADTEST_EXE, kScene, "--clients", "2", "--duration", seconds, "--domain", domain,
+  return {HAPCO_LOADTEST_EXE, kScene, "--clients", "2", "--duration-s", seconds, "--domain", domain,
           "--trajectory-loop", "--client-prefix", "ci", "--csv-dir", out_dir, "--rt-priority", "80",
           "--connect-timeout-s", "60"};
 }

@@ -53,7 +53,7 @@ bool WaitForText(const std::string& path, const std::string& text, int timeout_m
 void StartRecorder(std::unique_ptr<Process>* recorder, const std::string& dir, const std::string& domain,
                    const std::string& file) {
   *recorder = std::make_unique<Process>(
-      std::vector<std::string>{HAPCO_RECORDER_EXE, "--output", file, "--domain", domain, "--scene", kScene},
+      std::vector<std::string>{HAPCO_RECORDER_EXE, kScene, "--output", file, "--domain", domain},
       dir + "/recorder.out", dir + "/recorder.err");
   ASSERT_TRUE(WaitForText(dir + "/recorder.out", "found", 60'000)) << ReadFile(dir + "/recorder.err");
 }
@@ -123,7 +123,7 @@ TEST(RecorderProcess, RecordingHoldsExactlyTheServersSteps) {
   const std::string dir = TestDir();
   const std::string domain = std::to_string(SetUpTestDomain());
   const std::string file = dir + "/run.hapcorec";
-  Process server({HAPCO_SERVER_EXE, kScene, "--domain", domain, "--status-period", "0.2", "--trace",
+  Process server({HAPCO_SERVER_EXE, kScene, "--domain", domain, "--status-period-s", "0.2", "--trace",
                   dir + "/trace.csv", "--quiet"},
                  dir + "/server.out", dir + "/server.err");
   std::unique_ptr<Process> recorder;
@@ -217,14 +217,14 @@ TEST(RecorderProcess, KilledRecorderLeavesAReadableFile) {
   const std::string dir = TestDir();
   const std::string domain = std::to_string(SetUpTestDomain());
   const std::string file = dir + "/killed.hapcorec";
-  Process server({HAPCO_SERVER_EXE, kScene, "--domain", domain, "--status-period", "0.2", "--trace",
+  Process server({HAPCO_SERVER_EXE, kScene, "--domain", domain, "--status-period-s", "0.2", "--trace",
                   dir + "/trace.csv", "--quiet"},
                  dir + "/server.out", dir + "/server.err");
   std::unique_ptr<Process> recorder;
   ASSERT_NO_FATAL_FAILURE(StartRecorder(&recorder, dir, domain, file));
   {
     // 2 s of ticks: the trajectory, then holding its last point.
-    Process phantom({HAPCO_PHANTOM_EXE, kScene, "--client-id", "phantom-1", "--domain", domain, "--duration", "2",
+    Process phantom({HAPCO_PHANTOM_EXE, kScene, "--client-id", "phantom-1", "--domain", domain, "--duration-s", "2",
                      "--connect-timeout-s", "60"},
                     dir + "/phantom.out", dir + "/phantom.err");
     // Mid-run: once ~100 steps are on disk (~1.8 kB each), while the phantom still runs.
@@ -284,7 +284,7 @@ TEST(RecorderProcess, ReportWritesChartsAndOneCsvRowPerStep) {
   const std::string dir = TestDir();
   const std::string domain = std::to_string(SetUpTestDomain());
   const std::string file = dir + "/two.hapcorec";
-  Process server({HAPCO_SERVER_EXE, kScene, "--domain", domain, "--status-period", "0.2", "--quiet"},
+  Process server({HAPCO_SERVER_EXE, kScene, "--domain", domain, "--status-period-s", "0.2", "--quiet"},
                  dir + "/server.out", dir + "/server.err");
   std::unique_ptr<Process> recorder;
   ASSERT_NO_FATAL_FAILURE(StartRecorder(&recorder, dir, domain, file));

@@ -19,10 +19,10 @@ namespace {
 
 const std::string kScene = std::string(HAPCO_SOURCE_DIR) + "/tests/data/scenes/coarse.txtpb";
 
-// Safety parameters of hapco-phantom (client/phantom/phantom.h defaults; --timeout-ms below).
+// Safety parameters of hapco-phantom (client/phantom/phantom.h defaults; --force-timeout-ms below).
 constexpr double kMaxForceN = 7.9;
 constexpr double kMaxChangePerTickN = 0.25;
-constexpr double kTimeoutS = 0.050;  // --timeout-ms 50
+constexpr double kTimeoutS = 0.050;  // --force-timeout-ms 50
 // The ramp to zero after a timeout: max(20 ms, |F| / 250 N/s), linear in time from the moment
 // the timeout expired (phantom.h).
 double RampDurationS(double force_n) { return std::max(0.020, force_n / 250.0); }
@@ -51,7 +51,7 @@ std::vector<Tick> ReadTicks(const std::string& path) {
   return ticks;
 }
 
-// Press 3 mm in 0.1 mm steps, then the phantom holds the last point (--duration).
+// Press 3 mm in 0.1 mm steps, then the phantom holds the last point (--duration-s).
 std::string WritePressTrajectory(const std::string& dir) {
   const std::string path = dir + "/press.csv";
   std::ofstream out(path);
@@ -78,7 +78,7 @@ TEST(ServerFailover, ClientRampsToZeroWhenTheServerDiesAndResumesWhenOneReturns)
       std::vector<std::string>{HAPCO_SERVER_EXE, kScene, "--domain", std::to_string(domain)}, dir + "/server1.out",
       dir + "/server1.err");
   Process phantom({HAPCO_PHANTOM_EXE, kScene, "--client-id", "phantom-1", "--domain", std::to_string(domain),
-                   "--trajectory", trajectory, "--duration", "5", "--timeout-ms", "50", "--csv",
+                   "--trajectory", trajectory, "--duration-s", "5", "--force-timeout-ms", "50", "--csv",
                    dir + "/phantom.csv", "--connect-timeout-s", "60"},
                   dir + "/phantom.out", dir + "/phantom.err");
 
@@ -192,7 +192,7 @@ TEST(ServerFailover, AClientBeyondMaxSessionsIsRefusedWithAClearMessage) {
 
   Process server({HAPCO_SERVER_EXE, kScene, "--domain", domain, "--max-sessions", "1"}, dir + "/server.out",
                  dir + "/server.err");
-  Process first({HAPCO_PHANTOM_EXE, kScene, "--client-id", "first", "--domain", domain, "--duration", "20",
+  Process first({HAPCO_PHANTOM_EXE, kScene, "--client-id", "first", "--domain", domain, "--duration-s", "20",
                  "--connect-timeout-s", "60"},
                 dir + "/first.out", dir + "/first.err");
   // The first client holds the only session once its forces flow.

@@ -59,7 +59,7 @@ TEST(ServerProcess, KinematicPhantomReceivesTheOfflineForces) {
 
   // SCHED_FIFO where permitted (else a warning): on the shared 2-core machine it removes
   // most lost ticks (platform-notes.md); the comparison below holds either way.
-  Process server({HAPCO_SERVER_EXE, kScene, "--domain", domain, "--status-period", "0.2", "--trace",
+  Process server({HAPCO_SERVER_EXE, kScene, "--domain", domain, "--status-period-s", "0.2", "--trace",
                   dir + "/trace.csv", "--rt-priority", "80"},
                  dir + "/server.out", dir + "/server.err");
   {
@@ -178,6 +178,50 @@ TEST(ServerProcess, FreePathOffTheScriptedFootprintGetsTheOfflineForces) {
   EXPECT_GT(last.z(), 0.5) << "pressed 2 mm, 30 mm off the scripted footprint: " << last.transpose();
 }
 
+// A device whose poses the server ignores is told so (issue 18): after 100 good poses the
+// path jumps 50 mm (beyond 10 x --max-jump-m, so every later pose is a jump). The server
+// answers the ignored poses with notices (last force, verdict), at most one per 100 ms; the
+// phantom prints why, never renders a notice as a force, and the force timeout engages.
+TEST(ServerProcess, PhantomIsToldWhenTheServerIgnoresItsPoses) {
+  const std::string dir = TestDir();
+  const std::string domain = std::to_string(SetUpTestDomain());
+  {
+    std::ofstream path(dir + "/jump.csv");
+    path << "x_m,y_m,z_m\n";
+    for (int k = 1; k <= 100; ++k) path << 0 << "," << 0 << "," << -1e-5 * k << "\n";
+    for (int k = 1; k <= 900; ++k) path << 0 << "," << 0.05 << "," << -0.001 << "\n";
+  }
+  Process server({HAPCO_SERVER_EXE, kScene, "--domain", domain, "--trace", dir + "/trace.csv"},
+                 dir + "/server.out", dir + "/server.err");
+  {
+    Process phantom({HAPCO_PHANTOM_EXE, kScene, "--client-id", "jumper", "--domain", domain, "--trajectory",
+                     dir + "/jump.csv", "--csv", dir + "/phantom.csv", "--connect-timeout-s", "60"},
+                    dir + "/phantom.out", dir + "/phantom.err");
+    ASSERT_EQ(phantom.Wait(120'000), 0) << ReadFile(dir + "/phantom.err");
+  }
+  server.Signal(SIGTERM);
+  ASSERT_EQ(server.Wait(30'000), 0) << ReadFile(dir + "/server.err");
+  const std::string phantom_err = ReadFile(dir + "/phantom.err");
+  EXPECT_NE(phantom_err.find("the server ignores this device's poses: position jump above the server's limit"),
+            std::string::npos)
+      << phantom_err;
+  EXPECT_NE(phantom_err.find("no force for 50 ms: ramping the force to zero"), std::string::npos) << phantom_err;
+
+  // The server stepped none of the jumped poses, and sent a bounded number of notices:
+  // 900 ignored poses over ~0.9 s -> at most one per 100 ms (+1 for the edges).
+  for (const auto& row : ReadCsv(dir + "/trace.csv")) EXPECT_LE(std::stoull(row.at("sequence")), 100u);
+  const std::string server_out = ReadFile(dir + "/server.out");
+  const auto at = server_out.find("ignored-pose notices sent ");
+  ASSERT_NE(at, std::string::npos) << server_out;
+  const int notices = std::stoi(server_out.substr(at + std::strlen("ignored-pose notices sent ")));
+  EXPECT_GE(notices, 3) << server_out;
+  EXPECT_LE(notices, 11) << server_out;
+  // A notice is never a force: the phantom's forces answer stepped poses only.
+  for (const auto& row : ReadCsv(dir + "/phantom.csv")) {
+    EXPECT_LE(std::stoll(row.at("force_sequence")), 100) << "a notice was taken for a force";
+  }
+}
+
 // Parallel stepping (--threads 3): four phantoms on different free paths at 1 kHz, so most
 // ticks step several sessions at once on the pool. Every force sent is bit for bit a replay of
 // that client's stepped poses on one thread, and the clients received exactly what was sent.
@@ -290,7 +334,7 @@ TEST(ServerProcess, PhysicsNoneAnswersEveryStepWithAZeroForce) {
 TEST(ServerProcess, BadPosesAndInvalidClientIdAreCountedAndTheServerStaysUp) {
   const std::string dir = TestDir();
   const dds_domainid_t domain = SetUpTestDomain();
-  Process server({HAPCO_SERVER_EXE, kScene, "--domain", std::to_string(domain), "--status-period", "0.05"},
+  Process server({HAPCO_SERVER_EXE, kScene, "--domain", std::to_string(domain), "--status-period-s", "0.05"},
                  dir + "/server.out", dir + "/server.err");
 
   Participant participant(domain);

@@ -1,4 +1,4 @@
-#include "common/cli.h"
+#include "cli/run_main.h"
 
 #include <gtest/gtest.h>
 
@@ -9,23 +9,7 @@
 namespace hapco::cli {
 namespace {
 
-TEST(CliTest, ParsesNumbersAndNamesTheFlagOnBadInput) {
-  EXPECT_DOUBLE_EQ(ParseDouble("--tol", "1e-6"), 1e-6);
-  EXPECT_EQ(ParseInteger("--steps", "42", 1, 100), 42);
-  for (const char* bad : {"", "abc", "1e-6x", "nan", "inf"}) {
-    try {
-      ParseDouble("--tol", bad);
-      FAIL() << bad;
-    } catch (const InputError& error) {
-      EXPECT_NE(std::string(error.what()).find("--tol expects a number"), std::string::npos);
-    }
-  }
-  EXPECT_THROW(ParseInteger("--steps", "0", 1, 100), InputError);
-  EXPECT_THROW(ParseInteger("--steps", "101", 1, 100), InputError);
-  EXPECT_THROW(ParseInteger("--steps", "3.5", 1, 100), InputError);
-}
-
-TEST(CliTest, RunMainMapsErrorsToExitCodes) {
+TEST(RunMainTest, MapsErrorsToExitCodes) {
   EXPECT_EQ(RunMain("tool", [] { return 0; }), 0);
   EXPECT_EQ(RunMain("tool", [] { return 2; }), 2);
   testing::internal::CaptureStderr();
@@ -34,6 +18,12 @@ TEST(CliTest, RunMainMapsErrorsToExitCodes) {
   testing::internal::CaptureStderr();
   EXPECT_EQ(RunMain("tool", []() -> int { throw std::runtime_error("boom"); }), 3);
   EXPECT_EQ(testing::internal::GetCapturedStderr(), "tool: unexpected error: boom\n");
+}
+
+TEST(RunMainTest, VersionLineNamesToolAndVersion) {
+  const std::string line = VersionLine("hapco-x");
+  EXPECT_EQ(line.rfind("hapco-x HapCo ", 0), 0u) << line;
+  EXPECT_NE(line.find("(git "), std::string::npos) << line;
 }
 
 }  // namespace

@@ -1,0 +1,430 @@
+#include "cli/command_line.h"
+
+#include <algorithm>
+#include <cerrno>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <sstream>
+
+#include "cli/run_main.h"
+#include "common/error.h"
+
+namespace hapco::cli {
+namespace {
+
+constexpr int kHelpWidth = 96;        // columns of the help text
+constexpr int kHelpOptionColumn = 24;  // where option descriptions start
+
+// Thrown by --bash-completion while parsing (before required options are checked).
+class CompletionRequested : public CLI::Success {
+ public:
+  CompletionRequested() : CLI::Success("bash completion requested", 0) {}
+};
+
+std::string Quoted(const std::string& text) { return "'" + text + "'"; }
+
+// A finite decimal number, else nullopt-like: returns false.
+bool ToFiniteDouble(const std::string& text, double* value) {
+  if (text.empty()) return false;
+  char* end = nullptr;
+  errno = 0;
+  const double parsed = std::strtod(text.c_str(), &end);
+  if (end != text.c_str() + text.size() || !std::isfinite(parsed)) return false;
+  *value = parsed;
+  return true;
+}
+
+bool ToInteger(const std::string& text, long* value) {
+  if (text.empty()) return false;
+  char* end = nullptr;
+  errno = 0;
+  const long parsed = std::strtol(text.c_str(), &end, 10);
+  if (end != text.c_str() + text.size() || errno == ERANGE) return false;
+  *value = parsed;
+  return true;
+}
+
+std::string FormatNumber(double value) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%g", value);
+  return text;
+}
+
+std::string Join(const std::vector<std::string>& items, const std::string& separator) {
+  std::string joined;
+  for (const std::string& item : items) joined += (joined.empty() ? "" : separator) + item;
+  return joined;
+}
+
+// "--output" or "-o, --output" or "SCENE" for an option.
+std::string DisplayNames(const CLI::Option& option) {
+  if (option.get_positional()) return option.get_name(true);
+  std::vector<std::string> names;
+  for (const std::string& name : option.get_snames()) names.push_back("-" + name);
+  for (const std::string& name : option.get_lnames()) names.push_back("--" + name);
+  return Join(names, ", ");
+}
+
+}  // namespace
+
+std::string WrapText(const std::string& text, int width, int indent, int first_column) {
+  std::string out;
+  int column = first_column;
+  std::istringstream lines(text);
+  std::string line;
+  bool first_line = true;
+  while (std::getline(lines, line)) {
+    if (!first_line) {
+      out += "\n" + std::string(indent, ' ');
+      column = indent;
+    }
+    first_line = false;
+    // Keep a line's own leading spaces (indented examples in descriptions).
+    const size_t lead = line.find_first_not_of(' ');
+    if (lead == std::string::npos) continue;
+    out += line.substr(0, lead);
+    column += static_cast<int>(lead);
+    std::istringstream words(line.substr(lead));
+    std::string word;
+    bool line_start = true;
+    while (words >> word) {
+      if (!line_start && column + 1 + static_cast<int>(word.size()) > width) {
+        out += "\n" + std::string(indent, ' ');
+        column = indent;
+        line_start = true;
+      }
+      if (!line_start) {
+        out += ' ';
+        ++column;
+      }
+      out += word;
+      column += static_cast<int>(word.size());
+      line_start = false;
+    }
+  }
+  return out;
+}
+
+CommandLine::CommandLine(std::string tool, std::string synopsis, std::string description, std::string footer)
+    : tool_(std::move(tool)), synopsis_(std::move(synopsis)), description_(std::move(description)),
+      footer_(std::move(footer)) {
+  app_.name(tool_);
+  // A flag given twice: the last one wins (as the hand-written parsers did), not an error.
+  app_.option_defaults()->multi_option_policy(CLI::MultiOptionPolicy::TakeLast);
+  app_.set_help_flag("-h,--help", "this text")->group(kGroupGeneral);
+  const std::string version = VersionLine(tool_);
+  app_.add_flag_callback("--version", [version] { throw CLI::CallForVersion(version, 0); },
+                         "the HapCo version and git revision, then exit")
+      ->group(kGroupGeneral)
+      ->trigger_on_parse();
+  app_.add_flag_callback("--bash-completion", [] { throw CompletionRequested(); },
+                         "print a bash completion function for this tool (scripts/bash-completion)")
+      ->group(kGroupGeneral)
+      ->trigger_on_parse();
+}
+
+CLI::Option* CommandLine::AddNumber(const std::string& name, double* value, const std::string& metavar,
+                                    const std::string& help, const std::string& group, double minimum,
+                                    double maximum, bool open_minimum) {
+  const std::string flag = name;
+  CLI::Validator check(
+      [flag, minimum, maximum, open_minimum](std::string& text) -> std::string {
+        double parsed = 0;
+        if (!ToFiniteDouble(text, &parsed)) throw InputError(flag + " expects a number, got " + Quoted(text));
+        const bool below = open_minimum ? !(parsed > minimum) : parsed < minimum;
+        if (below || parsed > maximum) {
+          std::string range;
+          if (maximum == HUGE_VAL) {
+            range = (open_minimum ? "> " : ">= ") + FormatNumber(minimum);
+          } else {
+            range = (open_minimum ? "in (" : "in [") + FormatNumber(minimum) + ", " + FormatNumber(maximum) + "]";
+          }
+          throw InputError(flag + " expects a number " + range + ", got " + Quoted(text));
+        }
+        return "";
+      },
+      "");
+  metavars_[name] = metavar;
+  return app_.add_option(name, *value, help)->check(check)->group(group);
+}
+
+CLI::Option* CommandLine::AddInteger(const std::string& name, int* value, const std::string& metavar,
+                                     const std::string& help, const std::string& group, long minimum,
+                                     long maximum) {
+  const std::string flag = name;
+  CLI::Validator check(
+      [flag, minimum, maximum](std::string& text) -> std::string {
+        long parsed = 0;
+        if (!ToInteger(text, &parsed) || parsed < minimum || parsed > maximum) {
+          throw InputError(flag + " expects an integer in [" + std::to_string(minimum) + ", " +
+                           std::to_string(maximum) + "], got " + Quoted(text));
+        }
+        return "";
+      },
+      "");
+  metavars_[name] = metavar;
+  return app_.add_option(name, *value, help)->check(check)->group(group);
+}
+
+CLI::Option* CommandLine::AddText(const std::string& name, std::string* value, const std::string& metavar,
+                                  const std::string& help, const std::string& group) {
+  metavars_[name] = metavar;
+  return app_.add_option(name, *value, help)->group(group);
+}
+
+CLI::Option* CommandLine::AddChoice(const std::string& name, std::string* value, std::vector<std::string> choices,
+                                    const std::string& help, const std::string& group) {
+  const std::string flag = name;
+  CLI::Validator check(
+      [flag, choices](std::string& text) -> std::string {
+        if (std::find(choices.begin(), choices.end(), text) == choices.end()) {
+          throw InputError(flag + " expects " + Join(choices, " | ") + ", got " + Quoted(text));
+        }
+        return "";
+      },
+      "");
+  metavars_[name] = Join(choices, "|");
+  choices_[name] = std::move(choices);
+  return app_.add_option(name, *value, help)->check(check)->group(group);
+}
+
+CLI::Option* CommandLine::AddFlag(const std::string& name, bool* value, const std::string& help,
+                                  const std::string& group) {
+  return app_.add_flag(name, *value, help)->group(group);
+}
+
+CLI::Option* CommandLine::AddScene(std::string* path, const std::string& help) {
+  metavars_["SCENE"] = "";
+  return app_.add_option("SCENE", *path, help)->required()->group("Arguments");
+}
+
+CLI::Option* CommandLine::AddDomain(int* domain) {
+  return AddInteger("--domain", domain, "N",
+                    "DDS domain id (default 0); the configuration comes from CYCLONEDDS_URI "
+                    "(loopback: docker/cyclonedds-loopback.xml)",
+                    kGroupDds, 0, 230);
+}
+
+CLI::Option* CommandLine::AddRtPriority(int* priority, const std::string& what) {
+  return AddInteger("--rt-priority", priority, "N",
+                    "run " + what + " (and DDS's threads) with SCHED_FIFO priority N (1..99; needs "
+                    "CAP_SYS_NICE; default 0 = normal policy)",
+                    kGroupGeneral, 0, 99);
+}
+
+CLI::Option* CommandLine::AddQuiet(bool* quiet, const std::string& what) {
+  return AddFlag("--quiet", quiet, what, kGroupGeneral);
+}
+
+CLI::Option* CommandLine::AddOutput(std::string* path, const std::string& help) {
+  metavars_["--output"] = "FILE";
+  return app_.add_option("-o,--output", *path, help)->group(kGroupOutput);
+}
+
+CLI::Option* CommandLine::AddCsv(std::string* path, const std::string& help) {
+  return AddText("--csv", path, "FILE", help, kGroupOutput);
+}
+
+CLI::Option* CommandLine::AddSolver(std::string* name, const std::string& default_help) {
+  return AddChoice("--solver", name, {"local-uzawa", "global-uzawa-gs", "global-uzawa-jacobi", "reference"},
+                   "frictional contact solver (default: " + default_help +
+                       "); global-uzawa-jacobi is the De Saxce fixed point for stability studies: with "
+                       "the paper's rho it does not converge on the shipped meshes "
+                       "(docs/contact-benchmark.md)",
+                   "Solver");
+}
+
+CLI::Option* CommandLine::AddMaxIterations(int* iterations, const std::string& default_help) {
+  return AddInteger("--max-iter", iterations, "N",
+                    "cap on the solver's outer iterations (sweeps) (default: " + default_help + ")", "Solver", 1,
+                    100000000);
+}
+
+CLI::Option* CommandLine::AddConnectTimeout(double* seconds, const std::string& help) {
+  return AddNumber("--connect-timeout-s", seconds, "S", help, kGroupDds, 0, HUGE_VAL, true);
+}
+
+CLI::Option* CommandLine::AddForceTimeout(double* milliseconds) {
+  return AddNumber("--force-timeout-ms", milliseconds, "T",
+                   "no new force for T ms -> the rendered force ramps to zero in 20 ms (default 50); "
+                   "it resumes (rate limited) when forces return",
+                   "Device", 0, HUGE_VAL, true);
+}
+
+CLI::Option* CommandLine::AddDuration(double* seconds, const std::string& help) {
+  return AddNumber("--duration-s", seconds, "S", help, "Run", 0, HUGE_VAL, true);
+}
+
+CLI::Option* CommandLine::AddWorkspace(double* metres, const std::string& help) {
+  return AddNumber("--workspace-m", metres, "X", help, "Pose checks", 0, HUGE_VAL, true);
+}
+
+CLI::Option* CommandLine::AddMaxJump(double* metres, const std::string& help) {
+  return AddNumber("--max-jump-m", metres, "X", help, "Pose checks", 0, HUGE_VAL, true);
+}
+
+void CommandLine::Deprecate(const std::string& old_name, const std::string& current_name) {
+  deprecated_[old_name] = current_name;
+}
+
+bool CommandLine::Parse(int argc, char** argv) {
+  std::vector<std::string> arguments;
+  for (int k = 1; k < argc; ++k) arguments.emplace_back(argv[k]);
+  return Parse(std::move(arguments));
+}
+
+bool CommandLine::Parse(std::vector<std::string> arguments) {
+  // Old spellings first (never after "--", which ends the options).
+  std::vector<std::string> rewritten;
+  bool options_ended = false;
+  for (const std::string& argument : arguments) {
+    if (argument == "--") options_ended = true;
+    if (!options_ended) {
+      const std::string name = argument.substr(0, argument.find('='));
+      const auto old = deprecated_.find(name);
+      if (old != deprecated_.end()) {
+        const std::string& current = old->second;
+        if (current.empty()) {
+          std::fprintf(stderr, "%s: note: %s is deprecated: give the file as an argument (see --help)\n",
+                       tool_.c_str(), name.c_str());
+          if (name.size() < argument.size()) rewritten.push_back(argument.substr(name.size() + 1));
+        } else {
+          std::fprintf(stderr, "%s: note: %s is deprecated, use %s (same meaning)\n", tool_.c_str(), name.c_str(),
+                       current.c_str());
+          rewritten.push_back(current + argument.substr(name.size()));
+        }
+        continue;
+      }
+    }
+    rewritten.push_back(argument);
+  }
+  std::reverse(rewritten.begin(), rewritten.end());  // CLI11 takes the arguments reversed
+  try {
+    app_.parse(rewritten);
+  } catch (const CLI::CallForHelp&) {
+    std::fputs(Help().c_str(), stdout);
+    return false;
+  } catch (const CLI::CallForVersion& version) {
+    std::printf("%s\n", version.what());
+    return false;
+  } catch (const CompletionRequested&) {
+    std::fputs(BashCompletion().c_str(), stdout);
+    return false;
+  } catch (const CLI::ExtrasError&) {
+    const std::vector<std::string> extra = app_.remaining();
+    const std::string first = extra.empty() ? std::string("?") : extra.front();
+    if (!first.empty() && first[0] == '-') throw InputError("unknown option " + first + " (see --help)");
+    throw InputError("unexpected argument " + Quoted(first) + " (see --help)");
+  } catch (const CLI::RequiredError& error) {
+    // CLI11 checks requirements before extras: an unknown option is the better message
+    // ("hapco-sim --bogus" is a typo, not a missing scene).
+    for (const std::string& extra : app_.remaining()) {
+      if (!extra.empty() && extra[0] == '-') throw InputError("unknown option " + extra + " (see --help)");
+    }
+    const std::string what = error.what();
+    for (const CLI::Option* option : app_.get_options()) {
+      if (option->get_positional() && option->get_required() && option->count() == 0) {
+        throw InputError("missing " + option->get_name(true) + " argument (see --help)");
+      }
+    }
+    throw InputError(what + " (see --help)");
+  } catch (const CLI::ArgumentMismatch& error) {
+    // "--steps: 1 required INT missing" and the like: a flag at the end without its value.
+    std::string what = error.what();
+    const size_t colon = what.find(':');
+    if (colon != std::string::npos && what.rfind("--", 0) == 0) what = what.substr(0, colon) + " needs a value";
+    throw InputError(what + " (see --help)");
+  } catch (const CLI::ParseError& error) {
+    throw InputError(std::string(error.what()) + " (see --help)");
+  }
+  return true;
+}
+
+std::string CommandLine::Help() const {
+  std::string out = "usage: " + tool_ + " " + synopsis_ + "\n";
+  if (!description_.empty()) out += "\n" + WrapText(description_, kHelpWidth, 0, 0) + "\n";
+  // Groups in order of first appearance, General last; hidden options (no group) skipped.
+  std::vector<std::string> groups;
+  for (const CLI::Option* option : app_.get_options()) {
+    const std::string& group = option->get_group();
+    if (group.empty() || group == kGroupGeneral) continue;
+    if (std::find(groups.begin(), groups.end(), group) == groups.end()) groups.push_back(group);
+  }
+  // Positional arguments first.
+  std::stable_partition(groups.begin(), groups.end(), [](const std::string& g) { return g == "Arguments"; });
+  groups.push_back(kGroupGeneral);
+  for (const std::string& group : groups) {
+    out += "\n" + group + ":\n";
+    // The tool's own options first; in General, --help, --version and --bash-completion last.
+    std::vector<const CLI::Option*> listed;
+    for (const CLI::Option* option : app_.get_options()) {
+      if (option->get_group() == group) listed.push_back(option);
+    }
+    std::stable_partition(listed.begin(), listed.end(), [](const CLI::Option* option) {
+      const std::string name = option->get_name();
+      return name != "--help" && name != "--version" && name != "--bash-completion";
+    });
+    for (const CLI::Option* option : listed) {
+      std::string left = "  " + DisplayNames(*option);
+      const auto metavar = metavars_.find(option->get_name());
+      if (!option->get_positional() && metavar != metavars_.end() && !metavar->second.empty()) {
+        left += " " + metavar->second;
+      }
+      if (static_cast<int>(left.size()) + 2 > kHelpOptionColumn) {
+        left += "  ";
+      } else {
+        left.resize(kHelpOptionColumn, ' ');
+      }
+      out += left + WrapText(option->get_description(), kHelpWidth, kHelpOptionColumn,
+                             static_cast<int>(left.size())) + "\n";
+    }
+  }
+  if (!footer_.empty()) out += "\n" + WrapText(footer_, kHelpWidth, 0, 0) + "\n";
+  return out;
+}
+
+std::string CommandLine::BashCompletion() const {
+  std::string function = "_" + tool_;
+  std::replace(function.begin(), function.end(), '-', '_');
+  std::vector<std::string> flags, files, dirs, values;
+  std::string choice_cases;
+  for (const CLI::Option* option : app_.get_options()) {
+    if (option->get_positional()) continue;
+    std::vector<std::string> names;
+    for (const std::string& name : option->get_lnames()) names.push_back("--" + name);
+    for (const std::string& name : option->get_snames()) names.push_back("-" + name);
+    if (!option->get_group().empty()) {
+      for (const std::string& name : option->get_lnames()) flags.push_back("--" + name);
+    }
+    if (option->get_expected_max() == 0) continue;  // a flag: no value
+    const std::string key = option->get_name();
+    const auto choices = choices_.find(key);
+    const auto metavar = metavars_.find(key);
+    if (choices != choices_.end()) {
+      choice_cases += "    " + Join(names, "|") + ") COMPREPLY=($(compgen -W \"" + Join(choices->second, " ") +
+                      "\" -- \"$cur\")); return ;;\n";
+    } else if (metavar != metavars_.end() && metavar->second == "DIR") {
+      dirs.insert(dirs.end(), names.begin(), names.end());
+    } else if (metavar != metavars_.end() && metavar->second.find("FILE") != std::string::npos) {
+      files.insert(files.end(), names.begin(), names.end());
+    } else {
+      values.insert(values.end(), names.begin(), names.end());
+    }
+  }
+  std::string out = "# bash completion for " + tool_ + " (generated by " + tool_ + " --bash-completion)\n";
+  out += function + "() {\n";
+  out += "  local cur=\"${COMP_WORDS[COMP_CWORD]}\" prev=\"${COMP_WORDS[COMP_CWORD-1]}\"\n";
+  out += "  case \"$prev\" in\n" + choice_cases;
+  if (!files.empty()) out += "    " + Join(files, "|") + ") COMPREPLY=($(compgen -f -- \"$cur\")); return ;;\n";
+  if (!dirs.empty()) out += "    " + Join(dirs, "|") + ") COMPREPLY=($(compgen -d -- \"$cur\")); return ;;\n";
+  if (!values.empty()) out += "    " + Join(values, "|") + ") COMPREPLY=(); return ;;\n";
+  out += "  esac\n";
+  out += "  if [[ \"$cur\" == -* ]]; then\n";
+  out += "    COMPREPLY=($(compgen -W \"" + Join(flags, " ") + "\" -- \"$cur\"))\n";
+  out += "  else\n    COMPREPLY=($(compgen -f -- \"$cur\"))\n  fi\n}\n";
+  out += "complete -o filenames -F " + function + " " + tool_ + "\n";
+  return out;
+}
+
+}  // namespace hapco::cli

@@ -1,0 +1,113 @@
+#pragma once
+// One command-line convention for every HapCo executable (issue 18), on CLI11.
+//
+// A tool builds a CommandLine, adds its options (the shared ones through the Add* functions
+// below, so that the same concept has the same name, unit, range and help everywhere), then
+// calls Parse. Conventions (docs/cli.md):
+//   - a physical quantity carries its unit in the flag name: --duration-s, --max-jump-m,
+//     --force-timeout-ms, --paper-tol-m; dimensionless values do not (--tol, --mu);
+//   - the scene file is always the first positional argument, the tool's main output file is
+//     always --output FILE, a per-step table --csv FILE, charts --plots DIR;
+//   - a bad value names the flag and the accepted range ("--steps expects an integer in
+//     [1, 100000000], got 'x'"), an unknown option says "unknown option --x";
+//   - old spellings users have in scripts keep working through Deprecate(): the argument is
+//     rewritten before parsing and a one-line note goes to stderr.
+// --help (grouped by purpose), --version and --bash-completion come with every CommandLine.
+#include <CLI/CLI.hpp>
+
+#include <map>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace hapco::cli {
+
+// Help groups shared by the tools, in the order they usually appear.
+inline constexpr const char* kGroupDds = "DDS";
+inline constexpr const char* kGroupOutput = "Output";
+inline constexpr const char* kGroupGeneral = "General";
+
+class CommandLine {
+ public:
+  // tool: the executable's name; synopsis: what follows it on the usage line;
+  // description: the paragraphs shown after the usage line; footer: after the options
+  // (exit codes, signals).
+  CommandLine(std::string tool, std::string synopsis, std::string description, std::string footer);
+  // Options hold pointers into the caller's variables: build it in place, never copy it.
+  CommandLine(const CommandLine&) = delete;
+  CommandLine& operator=(const CommandLine&) = delete;
+
+  CLI::App& app() { return app_; }
+  const std::string& tool() const { return tool_; }
+
+  // --- typed options with HapCo's messages (the value is checked before it is converted) ---
+  // A finite number in [minimum, maximum]; open_minimum excludes the minimum itself.
+  CLI::Option* AddNumber(const std::string& name, double* value, const std::string& metavar,
+                         const std::string& help, const std::string& group, double minimum,
+                         double maximum, bool open_minimum = false);
+  CLI::Option* AddInteger(const std::string& name, int* value, const std::string& metavar,
+                          const std::string& help, const std::string& group, long minimum, long maximum);
+  CLI::Option* AddText(const std::string& name, std::string* value, const std::string& metavar,
+                       const std::string& help, const std::string& group);
+  // One of `choices` (the help's metavar lists them when it is empty).
+  CLI::Option* AddChoice(const std::string& name, std::string* value, std::vector<std::string> choices,
+                         const std::string& help, const std::string& group);
+  CLI::Option* AddFlag(const std::string& name, bool* value, const std::string& help, const std::string& group);
+
+  // --- shared definitions ---
+  // SCENE.txtpb, the first positional argument (required).
+  CLI::Option* AddScene(std::string* path, const std::string& help = "scene file (proto/scene.proto)");
+  // --domain N, 0..230, group DDS.
+  CLI::Option* AddDomain(int* domain);
+  // --rt-priority N, 0..99 (0 = normal policy); `what` names what runs SCHED_FIFO.
+  CLI::Option* AddRtPriority(int* priority, const std::string& what);
+  // --quiet; `what` says what is silenced.
+  CLI::Option* AddQuiet(bool* quiet, const std::string& what);
+  // --output FILE / -o FILE: the tool's main output file.
+  CLI::Option* AddOutput(std::string* path, const std::string& help);
+  // --csv FILE: one row per step or tick.
+  CLI::Option* AddCsv(std::string* path, const std::string& help);
+  // --solver NAME: the contact solvers of server/contact (same names as a scene file).
+  CLI::Option* AddSolver(std::string* name, const std::string& default_help);
+  // --max-iter N: outer iterations (sweeps) of the contact solver, 1..1e8.
+  CLI::Option* AddMaxIterations(int* iterations, const std::string& default_help);
+  // --connect-timeout-s S: how long to wait for a server (status, clients).
+  CLI::Option* AddConnectTimeout(double* seconds, const std::string& help);
+  // --force-timeout-ms T: no new force for T ms -> the rendered force ramps to zero.
+  CLI::Option* AddForceTimeout(double* milliseconds);
+  // --duration-s S: how long the tool runs.
+  CLI::Option* AddDuration(double* seconds, const std::string& help);
+  // --workspace-m X and --max-jump-m X: the pose checks of hapco-server (sim/pose_limits.h).
+  CLI::Option* AddWorkspace(double* metres, const std::string& help);
+  CLI::Option* AddMaxJump(double* metres, const std::string& help);
+
+  // `old_name` (e.g. "--record") keeps working as `current_name` ("--output"), with a note on
+  // stderr. An empty current_name drops the flag, so its value becomes a positional argument
+  // (recorder --scene FILE -> FILE).
+  void Deprecate(const std::string& old_name, const std::string& current_name);
+
+  // Parses the arguments. Returns false when the run is over with exit code 0 (--help,
+  // --version, --bash-completion printed on stdout). A bad command line throws InputError
+  // with a message that names the option (RunMain prints it and exits 1).
+  [[nodiscard]] bool Parse(int argc, char** argv);
+  // The same on already split arguments (tests).
+  [[nodiscard]] bool Parse(std::vector<std::string> arguments);
+
+  // The help text: usage line, description, options by group, footer.
+  std::string Help() const;
+  // A bash completion function for this tool, from the same definitions.
+  std::string BashCompletion() const;
+
+ private:
+  std::string tool_, synopsis_, description_, footer_;
+  CLI::App app_;
+  std::map<std::string, std::string> deprecated_;          // old spelling -> current ("" = drop)
+  std::map<std::string, std::vector<std::string>> choices_;  // option name -> accepted values
+  std::map<std::string, std::string> metavars_;              // option name -> FILE, DIR, N, ...
+};
+
+// Word-wraps `text` to `width` columns, continuation lines indented by `indent` spaces;
+// explicit newlines in `text` are kept.
+std::string WrapText(const std::string& text, int width, int indent, int first_column);
+
+}  // namespace hapco::cli

@@ -1,0 +1,159 @@
+#include "cli/command_line.h"
+
+#include <gtest/gtest.h>
+
+#include <string>
+#include <vector>
+
+#include "common/error.h"
+
+namespace hapco::cli {
+namespace {
+
+// A small tool with one option of each kind, as the executables define them.
+struct ToyOptions {
+  std::string scene, output, solver = "reference";
+  double tol = 1e-6, duration_s = 1;
+  int steps = 0, domain = 0;
+  bool quiet = false;
+};
+
+// A CommandLine keeps pointers to the options, so it is built in place.
+#define TOY_COMMAND(command) CommandLine command("hapco-toy", "SCENE [options]", "A toy tool.", "Exit code: 0.")
+
+void DefineToy(CommandLine& command, ToyOptions* options) {
+  command.AddScene(&options->scene);
+  command.AddDomain(&options->domain);
+  command.AddOutput(&options->output, "where to write");
+  command.AddSolver(&options->solver, "reference");
+  command.AddNumber("--tol", &options->tol, "X", "tolerance", "Solver", 0, HUGE_VAL, true);
+  command.AddInteger("--steps", &options->steps, "N", "steps", "Run", 1, 100);
+  command.AddDuration(&options->duration_s, "how long");
+  command.AddQuiet(&options->quiet, "no progress");
+  command.Deprecate("--record", "--output");
+  command.Deprecate("--scene", "");
+}
+
+std::string ErrorOf(const std::vector<std::string>& arguments) {
+  ToyOptions options;
+  TOY_COMMAND(command);
+  DefineToy(command, &options);
+  try {
+    (void)command.Parse(arguments);
+  } catch (const InputError& error) {
+    return error.what();
+  }
+  return "";
+}
+
+TEST(CommandLineTest, AcceptsGoodValues) {
+  ToyOptions options;
+  TOY_COMMAND(command);
+  DefineToy(command, &options);
+  ASSERT_TRUE(command.Parse({"scene.txtpb", "--tol", "1e-3", "--steps=7", "-o", "out.rec", "--solver",
+                             "local-uzawa", "--duration-s", "2.5", "--quiet", "--steps", "9"}));
+  EXPECT_EQ(options.scene, "scene.txtpb");
+  EXPECT_DOUBLE_EQ(options.tol, 1e-3);
+  EXPECT_EQ(options.steps, 9);  // the last one wins
+  EXPECT_EQ(options.output, "out.rec");
+  EXPECT_EQ(options.solver, "local-uzawa");
+  EXPECT_DOUBLE_EQ(options.duration_s, 2.5);
+  EXPECT_TRUE(options.quiet);
+}
+
+TEST(CommandLineTest, BadInputNamesTheOptionAndTheRange) {
+  EXPECT_EQ(ErrorOf({"s", "--steps", "banana"}), "--steps expects an integer in [1, 100], got 'banana'");
+  EXPECT_EQ(ErrorOf({"s", "--steps", "101"}), "--steps expects an integer in [1, 100], got '101'");
+  EXPECT_EQ(ErrorOf({"s", "--steps", "3.5"}), "--steps expects an integer in [1, 100], got '3.5'");
+  EXPECT_EQ(ErrorOf({"s", "--tol", "nan"}), "--tol expects a number, got 'nan'");
+  EXPECT_EQ(ErrorOf({"s", "--tol", "0"}), "--tol expects a number > 0, got '0'");
+  EXPECT_EQ(ErrorOf({"s", "--duration-s", "-5"}), "--duration-s expects a number > 0, got '-5'");
+  EXPECT_EQ(ErrorOf({"s", "--domain", "231"}), "--domain expects an integer in [0, 230], got '231'");
+  EXPECT_EQ(ErrorOf({"s", "--solver", "newton"}),
+            "--solver expects local-uzawa | global-uzawa-gs | global-uzawa-jacobi | reference, got 'newton'");
+  EXPECT_EQ(ErrorOf({"s", "--bogus"}), "unknown option --bogus (see --help)");
+  EXPECT_EQ(ErrorOf({"s", "extra"}), "unexpected argument 'extra' (see --help)");
+  EXPECT_EQ(ErrorOf({"--steps", "3"}), "missing SCENE argument (see --help)");
+  EXPECT_EQ(ErrorOf({"s", "--steps"}), "--steps needs a value (see --help)");
+}
+
+TEST(CommandLineTest, OldSpellingsKeepWorkingWithANote) {
+  ToyOptions options;
+  TOY_COMMAND(command);
+  DefineToy(command, &options);
+  testing::internal::CaptureStderr();
+  ASSERT_TRUE(command.Parse({"--record=old.rec", "--scene", "scene.txtpb"}));
+  const std::string notes = testing::internal::GetCapturedStderr();
+  EXPECT_EQ(options.output, "old.rec");
+  EXPECT_EQ(options.scene, "scene.txtpb");
+  EXPECT_NE(notes.find("hapco-toy: note: --record is deprecated, use --output"), std::string::npos) << notes;
+  EXPECT_NE(notes.find("--scene is deprecated: give the file as an argument"), std::string::npos) << notes;
+}
+
+TEST(CommandLineTest, HelpIsGroupedAndVersionIsListed) {
+  ToyOptions options;
+  TOY_COMMAND(command);
+  DefineToy(command, &options);
+  const std::string help = command.Help();
+  EXPECT_EQ(help.rfind("usage: hapco-toy SCENE [options]\n", 0), 0u) << help;
+  const size_t arguments = help.find("\nArguments:\n  SCENE");
+  const size_t dds = help.find("\nDDS:\n  --domain N");
+  const size_t solver = help.find("\nSolver:\n");
+  const size_t general = help.find("\nGeneral:\n");
+  ASSERT_NE(arguments, std::string::npos) << help;
+  ASSERT_NE(dds, std::string::npos) << help;
+  ASSERT_NE(solver, std::string::npos) << help;
+  ASSERT_NE(general, std::string::npos) << help;
+  EXPECT_LT(arguments, dds);
+  EXPECT_LT(solver, general);
+  EXPECT_NE(help.find("  -o, --output FILE"), std::string::npos) << help;
+  EXPECT_NE(help.find("  --version             the HapCo version"), std::string::npos) << help;
+  EXPECT_EQ(help.find("--record"), std::string::npos) << "deprecated spellings are not advertised";
+  // Wrapped to the help width.
+  std::size_t start = 0;
+  while (start < help.size()) {
+    const std::size_t end = help.find('\n', start);
+    EXPECT_LE(std::min(end, help.size()) - start, 96u) << help.substr(start, end - start);
+    start = end == std::string::npos ? help.size() : end + 1;
+  }
+}
+
+TEST(CommandLineTest, HelpAndVersionEndTheRunWithoutCheckingRequiredArguments) {
+  for (const char* flag : {"--help", "--version", "--bash-completion"}) {
+    ToyOptions options;
+    TOY_COMMAND(command);
+  DefineToy(command, &options);
+    testing::internal::CaptureStdout();
+    EXPECT_FALSE(command.Parse({flag})) << flag;
+    EXPECT_FALSE(testing::internal::GetCapturedStdout().empty()) << flag;
+  }
+}
+
+TEST(CommandLineTest, BashCompletionCompletesFlagsChoicesAndFiles) {
+  ToyOptions options;
+  TOY_COMMAND(command);
+  DefineToy(command, &options);
+  const std::string script = command.BashCompletion();
+  EXPECT_NE(script.find("complete -o filenames -F _hapco_toy hapco-toy"), std::string::npos) << script;
+  EXPECT_NE(script.find("--solver) COMPREPLY=($(compgen -W \"local-uzawa global-uzawa-gs"), std::string::npos)
+      << script;
+  EXPECT_NE(script.find("--output|-o) COMPREPLY=($(compgen -f"), std::string::npos) << script;
+  EXPECT_NE(script.find("--duration-s"), std::string::npos) << script;
+  EXPECT_EQ(script.find("--record"), std::string::npos) << script;
+  // A flag takes no value: after it, file names complete again.
+  EXPECT_EQ(script.find("--quiet)"), std::string::npos) << script;
+  EXPECT_EQ(script.find("--quiet|"), std::string::npos) << script;
+  EXPECT_EQ(script.find("|--quiet"), std::string::npos) << script;
+}
+
+TEST(CommandLineTest, AnUnknownOptionIsReportedBeforeAMissingArgument) {
+  EXPECT_EQ(ErrorOf({"--bogus"}), "unknown option --bogus (see --help)");
+}
+
+TEST(WrapTextTest, WrapsAtTheWidthAndKeepsExplicitLines) {
+  EXPECT_EQ(WrapText("aaa bbb ccc", 7, 2, 0), "aaa bbb\n  ccc");
+  EXPECT_EQ(WrapText("one\ntwo", 80, 4, 0), "one\n    two");
+}
+
+}  // namespace
+}  // namespace hapco::cli
