@@ -41,7 +41,7 @@ constexpr const char* kFooter =
 Exit code: 0 when it ran (also if it measured misses), 1 bad input, 2 no server found (no client connected), 3 DDS failure.)";
 
 struct Options {
-  std::string scene_path, mode = "kinematic", prefix = "lt", csv_dir;
+  std::string scene_path, mode = "kinematic", prefix = "lt", csv_dir, security_dir;
   int clients = 0, domain = 0, rt_priority = 0;
   double duration_s = 0, stagger_ms = 100, timeout_ms = 50, connect_timeout_s = 30;
   bool loop = false, plots = false, quiet = false;
@@ -79,6 +79,7 @@ bool Parse(int argc, char** argv, Options* o) {
                     "Device");
   command.AddForceTimeout(&o->timeout_ms);
   command.AddDomain(&o->domain);
+  command.AddSecurity(&o->security_dir, "DIR/<prefix>-<i> for client i (init the deployment with those names) and DIR/monitor for the status");
   command.AddText("--client-prefix", &o->prefix, "P", "client ids P-1..P-N (default lt)", hapco::cli::kGroupDds);
   command.AddConnectTimeout(&o->connect_timeout_s, "wait at most S s for the server (default 30)");
   command.AddText("--csv-dir", &o->csv_dir, "DIR",
@@ -142,8 +143,8 @@ struct StatusSample {
 // Reads "hapco/status" in its own participant and thread until stopped.
 class StatusMonitor {
  public:
-  StatusMonitor(int domain, std::chrono::steady_clock::time_point t0)
-      : t0_(t0), participant_(domain), topic_(participant_), subscriber_(participant_), reader_(subscriber_, topic_) {
+  StatusMonitor(int domain, const hapco::service::SecurityIdentity& identity, std::chrono::steady_clock::time_point t0)
+      : t0_(t0), participant_(domain, identity), topic_(participant_), subscriber_(participant_), reader_(subscriber_, topic_) {
     thread_ = std::thread([this] { Loop(); });
   }
   ~StatusMonitor() { Stop(); }
@@ -353,13 +354,16 @@ int Run(const Options& o) {
   // Before the first participant: Cyclone's threads inherit the policy (realtime.h).
   UseRealtimePriority(o.rt_priority, "hapco-loadtest");
 
-  StatusMonitor status(o.domain, t0);
+  StatusMonitor status(o.domain, o.security_dir.empty() ? hapco::service::SecurityIdentity{}
+                                                         : hapco::service::SecurityIdentity{o.security_dir, "monitor"},
+                       t0);
   std::vector<std::unique_ptr<ClientRun>> runs;
   for (int i = 1; i <= o.clients; ++i) {
     auto run = std::make_unique<ClientRun>();
     run->id = o.prefix + "-" + std::to_string(i);
     phantom::ClientConfig config = base;
     config.client_id = run->id;
+    if (!o.security_dir.empty()) config.security = {o.security_dir, run->id};
     run->client = std::make_unique<phantom::PhantomClient>(std::move(config));
     run->recorder = std::make_unique<loadtest::ClientRecorder>(base.ticks + base.drain_ticks + 16, tick_s);
     runs.push_back(std::move(run));

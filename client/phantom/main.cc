@@ -33,7 +33,7 @@ SIGINT/SIGTERM: the run stops, the session is left and the summary printed.
 Exit code: 0 done, 1 bad input, 2 no server found, 3 DDS failure.)";
 
 struct Options {
-  std::string scene_path, client_id, mode = "kinematic", trajectory = "scene", csv_path;
+  std::string scene_path, client_id, mode = "kinematic", trajectory = "scene", csv_path, security_dir;
   int domain = 0, rt_priority = 0;
   double duration_s = 0, timeout_ms = 50, connect_timeout_s = 30;
 };
@@ -61,6 +61,7 @@ bool Parse(int argc, char** argv, Options* o) {
                       "run S seconds, holding the trajectory's last point after its end (default: the "
                       "trajectory's length)");
   command.AddDomain(&o->domain);
+  command.AddSecurity(&o->security_dir, "DIR/<client id>");
   command.AddConnectTimeout(&o->connect_timeout_s, "wait at most S s for the server (default 30)");
   command.AddCsv(&o->csv_path,
                  "one row per tick (tick, time, pose sequence, position, force sequence, raw force, rendered "
@@ -110,6 +111,7 @@ int Run(const Options& o) {
   phantom::ClientConfig config;
   config.client_id = o.client_id;
   config.domain = o.domain;
+  if (!o.security_dir.empty()) config.security = {o.security_dir, o.client_id};
   config.mode = o.mode == "hand" ? phantom::DriveMode::kHand : phantom::DriveMode::kKinematic;
   config.trajectory = LoadTrajectory(o, scene);
   const int trajectory_ticks = static_cast<int>(config.trajectory.size()) - 1;

@@ -41,11 +41,13 @@ const char* ServerVerdictText(ServerVerdict verdict) {
 
 struct PhantomClient::Dds {
   explicit Dds(const ClientConfig& c)
-      : participant(c.domain),
+      : participant(c.domain, c.security),
         pose_topic(participant),
         force_topic(participant),
         session_topic(participant),
-        publisher(participant),
+        // Poses and session controls in the client's own partition: the server accepts a
+        // sample only for the client of its writer's partition (docs/security.md).
+        publisher(participant, service::ClientPartition(c.client_id)),
         subscriber(participant, service::ClientPartition(c.client_id)),
         pose_writer(publisher, pose_topic),
         session_writer(publisher, session_topic),

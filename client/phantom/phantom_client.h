@@ -22,6 +22,7 @@
 #include <vector>
 
 #include "phantom.h"
+#include "service/security.h"
 
 namespace hapco::phantom {
 
@@ -40,6 +41,7 @@ struct ClientConfig {
   SafetyParameters safety;                        // timeout, ramp, limits; tick_s is the servo period
   HandParameters hand;
   double connect_timeout_s = 30.0;
+  service::SecurityIdentity security;             // enabled: secured (DIR/<client_id>)
   // After the last pose, at most this many ticks collect the forces still in flight.
   int drain_ticks = 50;
 };

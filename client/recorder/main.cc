@@ -58,7 +58,7 @@ constexpr std::size_t kMaxPendingForces = 4096;
 constexpr uint64_t kLateWindow = 64;
 
 struct Options {
-  std::string output, scene_path;
+  std::string output, scene_path, security_dir;
   int domain = 0;
   double duration_s = 0;  // 0 = until a signal
   bool quiet = false;
@@ -73,6 +73,7 @@ bool Parse(int argc, char** argv, Options* o) {
       ->required(false);
   command.AddOutput(&o->output, "recording to write, created or truncated (required)");
   command.AddDomain(&o->domain);
+  command.AddSecurity(&o->security_dir, "DIR/recorder");
   command.AddDuration(&o->duration_s, "stop after S seconds (default: run until SIGINT/SIGTERM)");
   command.AddQuiet(&o->quiet, "no progress line (the exit summary is still printed)");
   command.Deprecate("--scene", "");
@@ -326,7 +327,8 @@ int Run(const Options& o) {
   Recorder recorder(&writer);
 
   using namespace hapco::service;
-  Participant participant(o.domain);
+  Participant participant(o.domain, o.security_dir.empty() ? hapco::service::SecurityIdentity{}
+                                                           : hapco::service::SecurityIdentity{o.security_dir, "recorder"});
   Topic<hapco_idl_ContactStateFrame> frame_topic(participant);
   Topic<hapco_idl_FeedbackForce> force_topic(participant);
   Topic<hapco_idl_ServerStatus> status_topic(participant);

@@ -256,6 +256,14 @@ CLI::Option* CommandLine::AddDuration(double* seconds, const std::string& help) 
   return AddNumber("--duration-s", seconds, "S", help, "Run", 0, HUGE_VAL, true);
 }
 
+CLI::Option* CommandLine::AddSecurity(std::string* dir, const std::string& who) {
+  metavars_["--security"] = "DIR";
+  return app_.add_option("--security", *dir,
+                         "secured DDS (authentication, access control, encryption) with the deployment made by "
+                         "scripts/dds-security init DIR; this tool runs as " + who + " (docs/security.md)")
+      ->group(kGroupDds);
+}
+
 CLI::Option* CommandLine::AddWorkspace(double* metres, const std::string& help) {
   return AddNumber("--workspace-m", metres, "X", help, "Pose checks", 0, HUGE_VAL, true);
 }

@@ -77,6 +77,9 @@ class CommandLine {
   CLI::Option* AddForceTimeout(double* milliseconds);
   // --duration-s S: how long the tool runs.
   CLI::Option* AddDuration(double* seconds, const std::string& help);
+  // --security DIR: run secured with the deployment of scripts/dds-security init DIR; `who`
+  // says which identity the tool takes (DIR/server, DIR/<client id>, ...).
+  CLI::Option* AddSecurity(std::string* dir, const std::string& who);
   // --workspace-m X and --max-jump-m X: the pose checks of hapco-server (sim/pose_limits.h).
   CLI::Option* AddWorkspace(double* metres, const std::string& help);
   CLI::Option* AddMaxJump(double* metres, const std::string& help);

@@ -10,8 +10,25 @@ Domain::Domain(dds_domainid_t domain_id, const std::string& config)
     : entity_(CheckEntity(dds_create_domain(domain_id, config.c_str()),
                           "dds_create_domain(" + std::to_string(domain_id) + ")")) {}
 
-Participant::Participant(dds_domainid_t domain_id)
-    : entity_(CheckEntity(dds_create_participant(domain_id, nullptr, nullptr),
+namespace {
+
+dds_entity_t CreateParticipant(dds_domainid_t domain_id, const SecurityIdentity& identity) {
+  if (!identity.enabled()) return dds_create_participant(domain_id, nullptr, nullptr);
+  std::unique_ptr<dds_qos_t, decltype(&dds_delete_qos)> qos(CreateSecurityQos(identity), &dds_delete_qos);
+  const dds_entity_t participant = dds_create_participant(domain_id, qos.get(), nullptr);
+  if (participant < 0) {
+    throw DdsError("secured participant '" + identity.name + "' (" + identity.dir +
+                       "): DDS-Security refused its identity, permissions or governance (signed by other CAs? "
+                       "outside the grant's validity?)",
+                   participant);
+  }
+  return participant;
+}
+
+}  // namespace
+
+Participant::Participant(dds_domainid_t domain_id, const SecurityIdentity& identity)
+    : entity_(CheckEntity(CreateParticipant(domain_id, identity),
                           "dds_create_participant(domain " + std::to_string(domain_id) +
                               "; check CYCLONEDDS_URI)")),
       domain_id_(domain_id) {}

@@ -18,6 +18,7 @@
 
 #include "service/dds_error.h"
 #include "service/qos.h"
+#include "service/security.h"
 #include "service/topics.h"
 
 namespace hapco::service {
@@ -61,8 +62,10 @@ class Domain {
 
 class Participant {
  public:
-  // Uses CYCLONEDDS_URI (or the Domain created before) for the configuration.
-  explicit Participant(dds_domainid_t domain_id);
+  // Uses CYCLONEDDS_URI (or the Domain created before) for the configuration. With an
+  // enabled `identity` the participant is secured (service/security.h): the identity is
+  // checked first (InputError with what to fix), then DDS-Security authenticates it.
+  explicit Participant(dds_domainid_t domain_id, const SecurityIdentity& identity = {});
   dds_entity_t handle() const { return entity_.handle(); }
   dds_domainid_t domain_id() const { return domain_id_; }
 

@@ -8,6 +8,10 @@ std::string Message(std::string_view what, dds_return_t code) {
   message += ": ";
   message += dds_strretcode(code);
   message += " (DDS return code " + std::to_string(code) + ")";
+  if (code == DDS_RETCODE_NOT_ALLOWED_BY_SECURITY) {
+    message += ": this participant's DDS-Security permissions do not grant it (a client may write and read only "
+               "its own partition: run it with the identity of its own client id, docs/security.md)";
+  }
   return message;
 }
 }  // namespace

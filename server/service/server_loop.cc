@@ -1,5 +1,7 @@
 #include "service/server_loop.h"
 
+#include <optional>
+
 #include <sys/resource.h>
 
 #include <algorithm>
@@ -18,7 +20,7 @@ namespace {
 constexpr dds_attach_t kPoseToken = 1;
 constexpr dds_attach_t kSessionToken = 2;
 // Rate limiting is per kind; each pose verdict is a kind of its own (kLogBadPose + verdict).
-enum LogKind { kLogClient = 0, kLogSession = 1, kLogFailure = 2, kLogBadPose = 3, kLogKinds = kLogBadPose + 7 };
+enum LogKind { kLogClient = 0, kLogSession = 1, kLogFailure = 2, kLogIdentity = 3, kLogBadPose = 4, kLogKinds = kLogBadPose + 7 };
 
 }  // namespace
 
@@ -26,18 +28,18 @@ ServerLoop::ServerLoop(std::vector<const sim::TwoBodyModel*> models, dds_domaini
                        const ServerOptions& options)
     : models_(std::move(models)),
       options_(options),
-      participant_(domain_id),
+      participant_(domain_id, options.security),
       pose_topic_(participant_),
       session_topic_(participant_),
       status_topic_(participant_),
       force_topic_(participant_),
       contact_topic_(participant_),
-      subscriber_(participant_),
+      client_subscriber_(participant_, kAllClientsPartition),
       publisher_(participant_),
       // Reader history 4 per client (the writers keep 1): poses that arrive while the server
       // is busy are taken and counted as superseded instead of vanishing in the reader.
-      pose_reader_(subscriber_, pose_topic_, PoseQos().KeepLast(4)),
-      session_reader_(subscriber_, session_topic_),
+      pose_reader_(client_subscriber_, pose_topic_, PoseQos().KeepLast(4)),
+      session_reader_(client_subscriber_, session_topic_),
       status_writer_(publisher_, status_topic_),
       waitset_(participant_),
       pool_(options.threads),
@@ -144,9 +146,55 @@ void ServerLoop::CloseSession(std::map<std::string, Client>::iterator it) {
   ++counters_.sessions_closed;
 }
 
+namespace {
+
+// The client a writer may speak for: X of its only partition "hapco/client/X" ("" if it has
+// none or several; nullopt if the writer is not known, e.g. already gone).
+// DDS-Security's permissions let client X write only there.
+std::optional<std::string> WriterClientId(dds_entity_t reader, dds_instance_handle_t writer) {
+  dds_builtintopic_endpoint_t* endpoint = dds_get_matched_publication_data(reader, writer);
+  if (endpoint == nullptr) return std::nullopt;
+  std::string id;
+  uint32_t count = 0;
+  char** names = nullptr;
+  if (dds_qget_partition(endpoint->qos, &count, &names)) {
+    const std::string_view prefix = kClientPartitionPrefix;
+    if (count == 1 && std::string_view(names[0]).substr(0, prefix.size()) == prefix) {
+      id = std::string(names[0] + prefix.size());
+    }
+    for (uint32_t k = 0; k < count; ++k) dds_free(names[k]);
+    dds_free(names);
+  }
+  dds_builtintopic_free_endpoint(endpoint);
+  return id;
+}
+
+}  // namespace
+
+bool ServerLoop::FromItsOwnWriter(const std::string& client_id, dds_entity_t reader, dds_instance_handle_t writer) {
+  auto known = writer_client_ids_.find(writer);
+  if (known == writer_client_ids_.end()) {
+    std::optional<std::string> writer_id = WriterClientId(reader, writer);
+    if (!writer_id) {
+      ++counters_.input.identity_mismatches;
+      Log(kLogIdentity, "sample claiming client '" + client_id + "' from an unknown writer ignored");
+      return false;
+    }
+    if (writer_client_ids_.size() >= 4096) writer_client_ids_.clear();  // bounded; rebuilt on demand
+    known = writer_client_ids_.emplace(writer, std::move(*writer_id)).first;
+  }
+  if (known->second == client_id) return true;
+  ++counters_.input.identity_mismatches;
+  Log(kLogIdentity, "sample claiming client '" + client_id + "' from the writer of " +
+                        (known->second.empty() ? std::string("no client partition") : "client '" + known->second + "'") +
+                        " ignored");
+  return false;
+}
+
 void ServerLoop::ProcessSessionControls() {
   hapco_idl_SessionControl control{};
-  while (session_reader_.Take(&control)) {
+  dds_sample_info_t info;
+  while (session_reader_.Take(&control, &info)) {
     const std::string id = ClientIdOf(control.client_id);
     if (!IsValidClientId(id)) {
       ++counters_.invalid_client_ids;
@@ -154,6 +202,7 @@ void ServerLoop::ProcessSessionControls() {
       Log(kLogClient, "session control with an invalid client id ignored");
       continue;
     }
+    if (!FromItsOwnWriter(id, session_reader_.handle(), info.publication_handle)) continue;
     auto it = sessions_.find(id);
     switch (control.command) {
       case hapco_idl_SESSION_JOIN: {
@@ -218,8 +267,9 @@ void ServerLoop::Count(PoseVerdict verdict, const std::string& client_id) {
 
 void ServerLoop::ProcessPoses() {
   hapco_idl_DevicePose pose{};
+  dds_sample_info_t info;
   // Take everything available; keep the newest valid pose per client.
-  while (pose_reader_.Take(&pose)) {
+  while (pose_reader_.Take(&pose, &info)) {
     const int64_t receive_ns = MonotonicNowNs();
     const std::string id = ClientIdOf(pose.client_id);
     if (!IsValidClientId(id)) {
@@ -228,6 +278,7 @@ void ServerLoop::ProcessPoses() {
       Log(kLogClient, "pose with an invalid client id ignored");
       continue;
     }
+    if (!FromItsOwnWriter(id, pose_reader_.handle(), info.publication_handle)) continue;
     auto it = sessions_.find(id);
     Client* client = nullptr;
     if (it == sessions_.end()) {
@@ -353,7 +404,7 @@ std::string ServerLoop::Summary() const {
                 "%llu sessions opened, %zu open; superseded %llu, "
                 "sequence gaps %llu; "
                 "bad input: nan %llu, workspace %llu, jumps %llu, out-of-order %llu, duplicates %llu, "
-                "unknown clients %llu, floods %llu; non-finite forces %llu, force write errors %llu, "
+                "unknown clients %llu, floods %llu, identity mismatches %llu; non-finite forces %llu, force write errors %llu, "
                 "contact frames dropped %llu; ignored-pose notices sent %llu",
                 static_cast<unsigned long long>(c.steps), static_cast<unsigned long long>(c.parallel_batches),
                 pool_.threads(), static_cast<unsigned long long>(c.sessions_opened),
@@ -362,7 +413,8 @@ std::string ServerLoop::Summary() const {
                 static_cast<unsigned long long>(in.bad_pose_nan), static_cast<unsigned long long>(in.out_of_workspace),
                 static_cast<unsigned long long>(in.position_jumps), static_cast<unsigned long long>(in.out_of_order),
                 static_cast<unsigned long long>(in.duplicates), static_cast<unsigned long long>(in.unknown_clients),
-                static_cast<unsigned long long>(in.floods), static_cast<unsigned long long>(c.non_finite_forces),
+                static_cast<unsigned long long>(in.floods), static_cast<unsigned long long>(in.identity_mismatches),
+                static_cast<unsigned long long>(c.non_finite_forces),
                 static_cast<unsigned long long>(c.force_write_errors),
                 static_cast<unsigned long long>(c.contact_frames_dropped),
                 static_cast<unsigned long long>(c.ignored_notices));

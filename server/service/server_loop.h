@@ -11,6 +11,7 @@
 #include <cstdio>
 #include <map>
 #include <set>
+#include <unordered_map>
 #include <memory>
 #include <string>
 #include <vector>
@@ -34,6 +35,7 @@ struct ServerOptions {
   // runs out returns SOLVER_TIME_BUDGET_EXCEEDED with the forces it has.
   double time_budget_s = -1.0;
   bool log = true;               // rate-limited stderr log of bad input and sessions
+  SecurityIdentity security;     // enabled: a secured participant (service/security.h)
   // Optional step trace (CSV, one row per step: client, sequence, position, force sent);
   // for tests and debugging. Not owned.
   std::FILE* trace = nullptr;
@@ -97,6 +99,10 @@ class ServerLoop {
   const sim::TwoBodyModel* FindModel(const std::string& scene_name) const;
   std::string SceneNames() const;  // "a, b" for messages
   void Count(PoseVerdict verdict, const std::string& client_id);
+  // True when `client_id` is the client the writer of a sample may speak for (the id of its
+  // partition), else counted as an identity mismatch and logged. One discovery lookup per
+  // writer, then a hash lookup per sample.
+  bool FromItsOwnWriter(const std::string& client_id, dds_entity_t reader, dds_instance_handle_t writer);
   void Log(int kind, const std::string& message);
 
   std::vector<const sim::TwoBodyModel*> models_;
@@ -108,7 +114,8 @@ class ServerLoop {
   Topic<hapco_idl_ServerStatus> status_topic_;
   Topic<hapco_idl_FeedbackForce> force_topic_;
   Topic<hapco_idl_ContactStateFrame> contact_topic_;
-  Subscriber subscriber_;
+  // Poses and session controls come in the clients' own partitions (hapco/client/<id>).
+  Subscriber client_subscriber_;
   Publisher publisher_;
   Reader<hapco_idl_DevicePose> pose_reader_;
   Reader<hapco_idl_SessionControl> session_reader_;
@@ -116,6 +123,7 @@ class ServerLoop {
   WaitSet waitset_;
   std::map<std::string, Client> sessions_;
   std::set<std::string> left_clients_;  // sent SESSION_LEAVE and not joined since
+  std::unordered_map<dds_instance_handle_t, std::string> writer_client_ids_;  // writer -> its client
   std::atomic<bool> stop_{false};
   ServerCounters counters_;
   // Counters of sessions closed so far (live sessions are added on demand).

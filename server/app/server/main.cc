@@ -79,6 +79,8 @@ bool Parse(int argc, char** argv, Options* options) {
                   "to FILE's folder), after those on the command line",
                   "Arguments");
   command.AddDomain(&options->domain);
+  std::string security_dir;
+  command.AddSecurity(&security_dir, "DIR/server");
   command.AddNumber("--status-period-s", &options->server.status_period_s, "S",
                     "ServerStatus period, s (default 1)", hapco::cli::kGroupDds, 0, HUGE_VAL, true);
   command.AddInteger("--max-sessions", &options->server.max_sessions, "N",
@@ -122,6 +124,7 @@ bool Parse(int argc, char** argv, Options* options) {
       physics == "none" ? hapco::service::SessionPhysics::kNone : hapco::service::SessionPhysics::kContact;
   if (time_budget_ms >= 0) options->server.time_budget_s = time_budget_ms * 1e-3;
   options->server.log = !quiet;
+  if (!security_dir.empty()) options->server.security = {security_dir, "server"};
   return true;
 }
 

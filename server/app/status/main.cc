@@ -25,7 +25,7 @@ constexpr const char* kFooter = "Exit code: 0 status received, 1 none in time (o
 struct Options {
   int domain = 0;
   double timeout_s = 5, max_age_s = 0;
-  std::string server_id;
+  std::string server_id, security_dir;
   bool quiet = false;
 };
 
@@ -33,6 +33,7 @@ struct Options {
 bool Parse(int argc, char** argv, Options* o) {
   hapco::cli::CommandLine command("hapco-status", "[options]", kDescription, kFooter);
   command.AddDomain(&o->domain);
+  command.AddSecurity(&o->security_dir, "DIR/monitor");
   command.AddConnectTimeout(&o->timeout_s, "give up after S seconds: exit 1 (default 5)");
   command.AddNumber("--max-age-s", &o->max_age_s, "S",
                     "accept only a status published less than S seconds ago (default: any); the server publishes "
@@ -49,7 +50,8 @@ dds_duration_t Seconds(double s) { return static_cast<dds_duration_t>(s * 1e9); 
 
 int Run(const Options& o) {
   namespace svc = hapco::service;
-  svc::Participant participant(o.domain);
+  svc::Participant participant(o.domain, o.security_dir.empty() ? svc::SecurityIdentity{}
+                                                               : svc::SecurityIdentity{o.security_dir, "monitor"});
   svc::Topic<hapco_idl_ServerStatus> topic(participant);
   svc::Subscriber subscriber(participant);
   svc::Reader<hapco_idl_ServerStatus> reader(subscriber, topic);

@@ -65,13 +65,12 @@ TEST(ServerFailover, ClientRampsToZeroWhenTheServerDiesAndResumesWhenOneReturns)
   const dds_domainid_t domain = SetUpTestDomain();
   const std::string trajectory = WritePressTrajectory(dir);
 
-  // The test watches the client's poses (default partition) and forces (its partition).
+  // The test watches the client's poses and forces (both in the client's partition).
   Participant participant(domain);
   Topic<hapco_idl_DevicePose> pose_topic(participant);
   Topic<hapco_idl_FeedbackForce> force_topic(participant);
-  Subscriber subscriber(participant);
   Subscriber client_subscriber(participant, ClientPartition("phantom-1"));
-  Reader<hapco_idl_DevicePose> pose_reader(subscriber, pose_topic);
+  Reader<hapco_idl_DevicePose> pose_reader(client_subscriber, pose_topic);
   Reader<hapco_idl_FeedbackForce> force_reader(client_subscriber, force_topic);
 
   auto first_server = std::make_unique<Process>(

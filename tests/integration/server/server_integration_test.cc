@@ -341,7 +341,8 @@ TEST(ServerProcess, BadPosesAndInvalidClientIdAreCountedAndTheServerStaysUp) {
   Topic<hapco_idl_DevicePose> pose_topic(participant);
   Topic<hapco_idl_FeedbackForce> force_topic(participant);
   Topic<hapco_idl_ServerStatus> status_topic(participant);
-  Publisher publisher(participant);
+  // The client writes in its own partition, as hapco-phantom does (docs/security.md).
+  Publisher publisher(participant, ClientPartition("good-1"));
   Subscriber client_subscriber(participant, ClientPartition("good-1"));
   Subscriber subscriber(participant);
   Writer<hapco_idl_DevicePose> pose_writer(publisher, pose_topic);
@@ -384,8 +385,9 @@ TEST(ServerProcess, BadPosesAndInvalidClientIdAreCountedAndTheServerStaysUp) {
   // Bad input, each kind once per round until the status shows all of them counted: a NaN
   // pose, a pose with an invalid id ('*' is a partition wildcard), one outside the workspace
   // (default 0.1 m), a jump of 5 cm (default limit 2 mm per sequence step), a repeat of the
-  // stepped sequence and an older sequence. None of them is stepped.
-  std::vector<hapco_idl_DevicePose> bad_poses(6, pose);
+  // stepped sequence, an older sequence, and a pose claiming another client from good-1's
+  // writer (partition hapco/client/good-1). None of them is stepped.
+  std::vector<hapco_idl_DevicePose> bad_poses(7, pose);
   bad_poses[0].sequence_number = 1'000'000;
   bad_poses[0].position_m.y = std::nan("");
   std::memset(bad_poses[1].client_id, 0, sizeof(bad_poses[1].client_id));
@@ -396,10 +398,12 @@ TEST(ServerProcess, BadPosesAndInvalidClientIdAreCountedAndTheServerStaysUp) {
   bad_poses[3].position_m.x += 0.05;
   bad_poses[4].sequence_number = force.pose_sequence;  // stepped already
   bad_poses[5].sequence_number = 0;                     // older than the stepped one
+  SetClientId(bad_poses[6].client_id, "other-1");       // impersonation
+  bad_poses[6].sequence_number = 4'000'000;
   hapco_idl_ServerStatus status{};
   auto all_counted = [&](const hapco_idl_InputCounters& c) {
     return c.bad_pose_nan >= 1 && c.unknown_clients >= 1 && c.out_of_workspace >= 1 && c.position_jumps >= 1 &&
-           c.duplicates >= 1 && c.out_of_order >= 1;
+           c.duplicates >= 1 && c.out_of_order >= 1 && c.identity_mismatches >= 1;
   };
   bool counted = false;
   const dds_time_t deadline = dds_time() + DDS_SECS(30);
@@ -412,8 +416,8 @@ TEST(ServerProcess, BadPosesAndInvalidClientIdAreCountedAndTheServerStaysUp) {
   const auto& c = status.counters;
   ASSERT_TRUE(counted) << "nan " << c.bad_pose_nan << ", unknown " << c.unknown_clients << ", workspace "
                        << c.out_of_workspace << ", jumps " << c.position_jumps << ", duplicates " << c.duplicates
-                       << ", out of order " << c.out_of_order;
-  EXPECT_EQ(status.sessions, 1u);  // the stranger got no session
+                       << ", out of order " << c.out_of_order << ", identity mismatches " << c.identity_mismatches;
+  EXPECT_EQ(status.sessions, 1u);  // neither the stranger nor the impersonated client got a session
   EXPECT_LE(status.step_time_p50_us, status.step_time_p99_us);
   EXPECT_LE(status.step_time_p99_us, status.step_time_max_us);
 
