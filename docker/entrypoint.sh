@@ -6,6 +6,9 @@
 # - HAPCO_DOMAIN, if set, becomes --domain for the hapco-* tools (a later --domain wins).
 # - hapco-phantom without --client-id gets HAPCO_CLIENT_ID, else the container's hostname
 #   (unique per compose replica).
+# - HAPCO_SECURITY_DIR, if set, becomes --security for the hapco-* tools: secured DDS with a
+#   deployment of scripts/dds-security mounted read-only there (DIR/public and the tool's own
+#   DIR/NAME; docs/security.md).
 set -eu
 
 if [ -z "${HAPCO_DDS_INTERFACE:-}" ]; then
@@ -36,6 +39,7 @@ esac
 case "$program" in
   hapco-server | hapco-phantom | hapco-recorder | hapco-status)
     if [ -n "${HAPCO_DOMAIN:-}" ]; then set -- --domain "$HAPCO_DOMAIN" "$@"; fi
+    if [ -n "${HAPCO_SECURITY_DIR:-}" ]; then set -- --security "$HAPCO_SECURITY_DIR" "$@"; fi
     ;;
 esac
 exec "$program" "$@"

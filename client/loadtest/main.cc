@@ -79,7 +79,9 @@ bool Parse(int argc, char** argv, Options* o) {
                     "Device");
   command.AddForceTimeout(&o->timeout_ms);
   command.AddDomain(&o->domain);
-  command.AddSecurity(&o->security_dir, "DIR/<prefix>-<i> for client i (init the deployment with those names) and DIR/monitor for the status");
+  command.AddSecurity(&o->security_dir,
+                      "DIR/loadtest-<prefix>, one identity for every client and the status view (scripts/dds-security "
+                      "add-load-tester DIR PREFIX)");
   command.AddText("--client-prefix", &o->prefix, "P", "client ids P-1..P-N (default lt)", hapco::cli::kGroupDds);
   command.AddConnectTimeout(&o->connect_timeout_s, "wait at most S s for the server (default 30)");
   command.AddText("--csv-dir", &o->csv_dir, "DIR",
@@ -354,16 +356,20 @@ int Run(const Options& o) {
   // Before the first participant: Cyclone's threads inherit the policy (realtime.h).
   UseRealtimePriority(o.rt_priority, "hapco-loadtest");
 
-  StatusMonitor status(o.domain, o.security_dir.empty() ? hapco::service::SecurityIdentity{}
-                                                         : hapco::service::SecurityIdentity{o.security_dir, "monitor"},
-                       t0);
+  // Secured: every participant of this process runs as one identity, loadtest-<prefix>
+  // (Cyclone 0.10.2 checks all secured participants of a process against one participant's
+  // permissions; docs/security.md).
+  const hapco::service::SecurityIdentity identity =
+      o.security_dir.empty() ? hapco::service::SecurityIdentity{}
+                             : hapco::service::SecurityIdentity{o.security_dir, "loadtest-" + o.prefix};
+  StatusMonitor status(o.domain, identity, t0);
   std::vector<std::unique_ptr<ClientRun>> runs;
   for (int i = 1; i <= o.clients; ++i) {
     auto run = std::make_unique<ClientRun>();
     run->id = o.prefix + "-" + std::to_string(i);
     phantom::ClientConfig config = base;
     config.client_id = run->id;
-    if (!o.security_dir.empty()) config.security = {o.security_dir, run->id};
+    config.security = identity;
     run->client = std::make_unique<phantom::PhantomClient>(std::move(config));
     run->recorder = std::make_unique<loadtest::ClientRecorder>(base.ticks + base.drain_ticks + 16, tick_s);
     runs.push_back(std::move(run));

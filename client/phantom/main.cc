@@ -132,6 +132,9 @@ int Run(const Options& o) {
   std::signal(SIGTERM, OnStopSignal);
   hapco::UseRealtimePriority(o.rt_priority, "hapco-phantom");
 
+  // Start-up cost as a user sees it: participant (and, secured, the handshakes), discovery,
+  // session, first force (docs/security.md measures it with and without security).
+  const int64_t start_ns = MonotonicNowNs();
   phantom::PhantomClient client(config);
   std::string why;
   if (!client.Connect(&why, [&o](const std::string& line) {
@@ -141,6 +144,7 @@ int Run(const Options& o) {
     if (csv != nullptr) std::fclose(csv);
     return 2;
   }
+  const int64_t connected_ns = MonotonicNowNs();
   client.Run(
       g_stop,
       [csv](const phantom::TickRecord& t) {
@@ -165,6 +169,11 @@ int Run(const Options& o) {
               static_cast<unsigned long long>(s.resumptions), static_cast<unsigned long long>(s.rejected_non_finite),
               static_cast<unsigned long long>(s.clamped), s.peak_rendered_n,
               static_cast<unsigned long long>(s.pose_write_errors));
+  if (s.first_force_arrival_ns >= 0) {
+    std::printf("  start-up: connected after %.3f s, first force %.3f s after start\n",
+                static_cast<double>(connected_ns - start_ns) * 1e-9,
+                static_cast<double>(s.first_force_arrival_ns - start_ns) * 1e-9);
+  }
   return 0;
 }
 

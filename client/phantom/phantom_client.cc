@@ -259,6 +259,7 @@ void PhantomClient::Run(const std::atomic<bool>& stop, const std::function<void(
         ++stats_.forces_reordered;
         continue;
       }
+      if (!any_force) stats_.first_force_arrival_ns = r.arrival_ns;
       any_force = true;
       ++stats_.forces_received;
       fresh = true;

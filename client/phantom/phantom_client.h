@@ -94,6 +94,7 @@ struct ClientStats {
   uint64_t ignored_notices = 0;     // notices "the server ignored pose N" received
   uint64_t server_ignored_poses = 0;  // the server's count in the newest sample
   double peak_rendered_n = 0;
+  int64_t first_force_arrival_ns = -1;  // CLOCK_MONOTONIC when the first force arrived (-1: none)
   std::vector<double> round_trip_us;       // pose sampled -> force arrived
   std::vector<double> render_latency_us;   // pose sampled -> the tick that renders it
   std::vector<double> server_time_us;      // server receive -> send

@@ -236,9 +236,11 @@ CLI::Option* CommandLine::AddSolver(std::string* name, const std::string& defaul
 }
 
 CLI::Option* CommandLine::AddMaxIterations(int* iterations, const std::string& default_help) {
+  // The range of a scene file's solver.max_iterations.
   return AddInteger("--max-iter", iterations, "N",
-                    "cap on the solver's outer iterations (sweeps) (default: " + default_help + ")", "Solver", 1,
-                    100000000);
+                    "cap on the solver's outer iterations (sweeps), 1..1000000 as in a scene file (default: " +
+                        default_help + ")",
+                    "Solver", 1, 1000000);
 }
 
 CLI::Option* CommandLine::AddConnectTimeout(double* seconds, const std::string& help) {

@@ -69,7 +69,7 @@ class CommandLine {
   CLI::Option* AddCsv(std::string* path, const std::string& help);
   // --solver NAME: the contact solvers of server/contact (same names as a scene file).
   CLI::Option* AddSolver(std::string* name, const std::string& default_help);
-  // --max-iter N: outer iterations (sweeps) of the contact solver, 1..1e8.
+  // --max-iter N: outer iterations (sweeps) of the contact solver, 1..1e6 (as a scene file).
   CLI::Option* AddMaxIterations(int* iterations, const std::string& default_help);
   // --connect-timeout-s S: how long to wait for a server (status, clients).
   CLI::Option* AddConnectTimeout(double* seconds, const std::string& help);

@@ -54,17 +54,17 @@ void ValidateSecurityIdentity(const SecurityIdentity& identity) {
                      " (scripts/dds-security add-client " + identity.dir + " " + identity.name + ")");
   }
   const X509Ptr certificate = ReadCertificate(cert_path, "the identity certificate");
-  const X509Ptr ca = ReadCertificate(FileOf(identity, "ca/identity_ca.pem"), "the identity CA");
+  const X509Ptr ca = ReadCertificate(FileOf(identity, "public/identity_ca.pem"), "the identity CA");
   RequireFile(FileOf(identity, identity.name + "/key.pem"), "the private key");
   RequireFile(FileOf(identity, identity.name + "/permissions.xml.p7s"), "the signed permissions");
-  RequireFile(FileOf(identity, "governance.xml.p7s"), "the signed governance");
-  RequireFile(FileOf(identity, "ca/permissions_ca.pem"), "the permissions CA");
-  RequireFile(FileOf(identity, "ca/crl.pem"), "the revocation list");
+  RequireFile(FileOf(identity, "public/governance.xml.p7s"), "the signed governance");
+  RequireFile(FileOf(identity, "public/permissions_ca.pem"), "the permissions CA");
+  RequireFile(FileOf(identity, "public/crl.pem"), "the revocation list");
 
   EVP_PKEY* ca_key = X509_get0_pubkey(ca.get());
   if (ca_key == nullptr || X509_verify(certificate.get(), ca_key) != 1) {
     throw InputError("security: the certificate " + cert_path + " is not signed by this deployment's identity CA " +
-                     FileOf(identity, "ca/identity_ca.pem"));
+                     FileOf(identity, "public/identity_ca.pem"));
   }
   const std::string common_name = CommonName(certificate.get());
   if (common_name != identity.name) {
@@ -79,7 +79,7 @@ void ValidateSecurityIdentity(const SecurityIdentity& identity) {
                      "revoke " + identity.dir + " " + identity.name + ", then add-client)");
   }
   // Revoked (scripts/dds-security revoke): Cyclone reads the same CRL; say so before it does.
-  const std::string crl_path = FileOf(identity, "ca/crl.pem");
+  const std::string crl_path = FileOf(identity, "public/crl.pem");
   if (std::FILE* file = std::fopen(crl_path.c_str(), "r")) {
     X509_CRL* crl = PEM_read_X509_CRL(file, nullptr, nullptr, nullptr);
     std::fclose(file);
@@ -102,15 +102,15 @@ dds_qos_t* CreateSecurityQos(const SecurityIdentity& identity) {
   dds_qset_prop(qos, "dds.sec.auth.library.path", "dds_security_auth");
   dds_qset_prop(qos, "dds.sec.auth.library.init", "init_authentication");
   dds_qset_prop(qos, "dds.sec.auth.library.finalize", "finalize_authentication");
-  dds_qset_prop(qos, "dds.sec.auth.identity_ca", file("ca/identity_ca.pem").c_str());
+  dds_qset_prop(qos, "dds.sec.auth.identity_ca", file("public/identity_ca.pem").c_str());
   dds_qset_prop(qos, "dds.sec.auth.identity_certificate", file(identity.name + "/cert.pem").c_str());
   dds_qset_prop(qos, "dds.sec.auth.private_key", file(identity.name + "/key.pem").c_str());
-  dds_qset_prop(qos, "org.eclipse.cyclonedds.sec.auth.crl", file("ca/crl.pem").c_str());
+  dds_qset_prop(qos, "org.eclipse.cyclonedds.sec.auth.crl", file("public/crl.pem").c_str());
   dds_qset_prop(qos, "dds.sec.access.library.path", "dds_security_ac");
   dds_qset_prop(qos, "dds.sec.access.library.init", "init_access_control");
   dds_qset_prop(qos, "dds.sec.access.library.finalize", "finalize_access_control");
-  dds_qset_prop(qos, "dds.sec.access.governance", file("governance.xml.p7s").c_str());
-  dds_qset_prop(qos, "dds.sec.access.permissions_ca", file("ca/permissions_ca.pem").c_str());
+  dds_qset_prop(qos, "dds.sec.access.governance", file("public/governance.xml.p7s").c_str());
+  dds_qset_prop(qos, "dds.sec.access.permissions_ca", file("public/permissions_ca.pem").c_str());
   dds_qset_prop(qos, "dds.sec.access.permissions", file(identity.name + "/permissions.xml.p7s").c_str());
   dds_qset_prop(qos, "dds.sec.crypto.library.path", "dds_security_crypto");
   dds_qset_prop(qos, "dds.sec.crypto.library.init", "init_crypto");

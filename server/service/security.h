@@ -2,9 +2,10 @@
 // Secured DDS (OMG DDS-Security, Cyclone DDS 0.10.2's builtin plugins): the identity a
 // participant runs with, checked before DDS sees it, and the participant QoS that carries it.
 // A deployment directory is made by scripts/dds-security (docs/security.md):
-//   DIR/ca/identity_ca.pem, DIR/ca/permissions_ca.pem, DIR/ca/crl.pem, DIR/governance.xml.p7s,
-//   DIR/NAME/{cert.pem, key.pem, permissions.xml.p7s} for NAME = server, recorder, monitor and
-//   each client id.
+//   DIR/public/{identity_ca.pem, permissions_ca.pem, crl.pem, governance.xml.p7s}: what every
+//   participant reads (no secret), DIR/NAME/{cert.pem, key.pem, permissions.xml.p7s} for NAME =
+//   server, recorder, monitor and each client id (a participant needs public/ and its own
+//   NAME/ only), DIR/ca/: the CA keys, never given to a participant.
 #include <dds/dds.h>
 
 #include <string>

@@ -138,12 +138,20 @@ if phantom dave "$work/dave" --security "$work/dep" && grep -q "forces received"
   ok "dave, added while the server runs: $(grep -o '[0-9]* forces received' "$work/dave.out")"
 else bad "dave (added live) got no forces: $(tail -2 "$work/dave.err")"; fi
 
+# hapco-loadtest: its clients share one load-tester identity (add-load-tester).
+"$scripts/dds-security" add-load-tester "$work/dep" lt >/dev/null || bad "add-load-tester failed"
+"$bin/hapco-loadtest" "$scene" --clients 2 --duration-s 1 --client-prefix lt --domain "$domain" \
+  --security "$work/dep" --connect-timeout-s 10 >"$work/loadtest.out" 2>"$work/loadtest.err"; code=$?
+if [ $code -eq 0 ] && grep -q "^all " "$work/loadtest.out" && grep -q "2 sessions at most" "$work/loadtest.out"; then
+  ok "secured load test, 2 clients as loadtest-lt: $(grep '^all ' "$work/loadtest.out" | cut -c1-60)"
+else bad "secured load test: exit $code: $(tail -2 "$work/loadtest.err")"; fi
+
 kill -INT "$recorder"; wait "$recorder"
 kill -INT "$server"; wait "$server"
 [ "$capture" = "--capture" ] && stop_capture
 
 # Identity checks before DDS: another client's certificate, one of another CA, no identity.
-mkdir -p "$work/mixed"; cp -r "$work/dep/ca" "$work/dep/governance.xml.p7s" "$work/mixed/"
+mkdir -p "$work/mixed"; cp -r "$work/dep/public" "$work/mixed/"
 cp -r "$work/dep/alice" "$work/mixed/alice"; cp "$work/dep/bob/cert.pem" "$work/mixed/alice/cert.pem"
 cp -r "$work/other/alice" "$work/mixed/eve"; sed -i "s|$work/other/alice|$work/mixed/eve|g" "$work/mixed/eve/security.xml"
 check_refused() {  # check_refused NAME DIR PATTERN DESCRIPTION
@@ -168,8 +176,8 @@ if phantom alice "$work/alice2" --security "$work/dep" && grep -q "forces receiv
   ok "alice after the revocation: $(grep -o '[0-9]* forces received' "$work/alice2.out")"
 else bad "alice after the revocation: $(tail -2 "$work/alice2.err")"; fi
 served=$(tail -n +2 "$work/trace.csv" | cut -d, -f1 | sort -u | tr '\n' ' ')
-if grep -q "3 sessions opened" "$work/server.out" && [ "$served" = "alice bob dave " ]; then
-  ok "server: 3 sessions opened, stepped only alice, bob, dave (none of the refused participants)"
+if grep -q "5 sessions opened" "$work/server.out" && [ "$served" = "alice bob dave lt-1 lt-2 " ]; then
+  ok "server: 5 sessions opened, stepped only alice, bob, dave, lt-1, lt-2 (none of the refused participants)"
 else
   bad "server sessions: $(grep -o '[0-9]* sessions opened' "$work/server.out"), stepped: $served"
 fi
