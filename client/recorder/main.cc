@@ -58,7 +58,7 @@ constexpr std::size_t kMaxPendingForces = 4096;
 constexpr uint64_t kLateWindow = 64;
 
 struct Options {
-  std::string output, scene_path, security_dir;
+  std::string output, scene_path, security_dir, ready_file;
   int domain = 0;
   double duration_s = 0;  // 0 = until a signal
   bool quiet = false;
@@ -74,6 +74,11 @@ bool Parse(int argc, char** argv, Options* o) {
   command.AddOutput(&o->output, "recording to write, created or truncated (required)");
   command.AddDomain(&o->domain);
   command.AddSecurity(&o->security_dir, "DIR/recorder");
+  command.AddText("--ready-file", &o->ready_file, "FILE",
+                  "create FILE once the recorder is ready: it has seen the server and matched its contact-state "
+                  "writers, so every session opened from then on is recorded from its first step (a readiness "
+                  "check for containers: docker/compose.yaml)",
+                  "Run");
   command.AddDuration(&o->duration_s, "stop after S seconds (default: run until SIGINT/SIGTERM)");
   command.AddQuiet(&o->quiet, "no progress line (the exit summary is still printed)");
   command.Deprecate("--scene", "");
@@ -370,6 +375,20 @@ int Run(const Options& o) {
     }
   };
 
+  // Ready once the server's recorder probe (a contact-state writer, service/server_loop.h) has
+  // matched: from then on the server opens a session only when this recorder has its writer.
+  bool ready = false;
+  auto check_ready = [&] {
+    if (ready || !server_seen || frame_reader.MatchedWriters() == 0) return;
+    ready = true;
+    std::printf("hapco-recorder: ready: new sessions are recorded from their first step\n");
+    std::fflush(stdout);
+    if (!o.ready_file.empty()) {
+      std::FILE* file = std::fopen(o.ready_file.c_str(), "w");
+      if (file == nullptr) throw hapco::InputError("cannot write --ready-file " + o.ready_file);
+      std::fclose(file);
+    }
+  };
   const int64_t start_ns = hapco::MonotonicNowNs();
   const int64_t end_ns = o.duration_s > 0 ? start_ns + static_cast<int64_t>(o.duration_s * 1e9) : INT64_MAX;
   int64_t next_progress_ns = start_ns + 1'000'000'000;
@@ -377,8 +396,9 @@ int Run(const Options& o) {
     const int64_t now = hapco::MonotonicNowNs();
     if (now >= end_ns) break;
     const int64_t wait_ns = std::min<int64_t>({end_ns - now, next_progress_ns - now, 200'000'000});
-    waitset.Wait(std::max<int64_t>(wait_ns, 0));
+    waitset.Wait(std::max<int64_t>(ready ? wait_ns : std::min<int64_t>(wait_ns, 20'000'000), 0));
     drain();
+    check_ready();
     if (hapco::MonotonicNowNs() >= next_progress_ns) {
       next_progress_ns += 1'000'000'000;
       if (!o.quiet) {

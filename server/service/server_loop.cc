@@ -41,6 +41,8 @@ ServerLoop::ServerLoop(std::vector<const sim::TwoBodyModel*> models, dds_domaini
       pose_reader_(client_subscriber_, pose_topic_, PoseQos().KeepLast(4)),
       session_reader_(client_subscriber_, session_topic_),
       status_writer_(publisher_, status_topic_),
+      recorder_probe_publisher_(participant_, ClientPartition(".recorder-probe")),
+      recorder_probe_(recorder_probe_publisher_, contact_topic_),
       waitset_(participant_),
       pool_(options.threads),
       last_log_ns_(kLogKinds, 0),
@@ -80,11 +82,14 @@ void ServerLoop::Run() {
   int64_t next_status_ns = MonotonicNowNs() + period_ns;
   PublishStatus(MonotonicNowNs());
   dds_attach_t tokens[4];
+  bool waiting_sessions = false;
   while (!stop_.load()) {
-    const int64_t wait_ns = std::max<int64_t>(0, next_status_ns - MonotonicNowNs());
+    int64_t wait_ns = std::max<int64_t>(0, next_status_ns - MonotonicNowNs());
+    if (waiting_sessions) wait_ns = std::min<int64_t>(wait_ns, 2'000'000);  // poll their recorders
     waitset_.Wait(wait_ns, tokens, 4);
     if (stop_.load()) break;
     ProcessSessionControls();
+    waiting_sessions = OpenWaitingSessions(MonotonicNowNs());
     ProcessPoses();
     const int64_t now = MonotonicNowNs();
     if (now >= next_status_ns) {
@@ -93,6 +98,21 @@ void ServerLoop::Run() {
     }
   }
   PublishStatus(MonotonicNowNs());
+}
+
+bool ServerLoop::OpenWaitingSessions(int64_t now_ns) {
+  bool waiting = false;
+  uint32_t recorders = 0;
+  bool counted = false;
+  for (auto& [id, client] : sessions_) {
+    if (client.session->open()) continue;
+    if (!counted) {
+      recorders = recorder_probe_.MatchedReaders();
+      counted = true;
+    }
+    if (!client.session->TryOpen(recorders, now_ns)) waiting = true;
+  }
+  return waiting;
 }
 
 const sim::TwoBodyModel* ServerLoop::FindModel(const std::string& scene_name) const {
@@ -295,6 +315,10 @@ void ServerLoop::ProcessPoses() {
       if (client == nullptr) continue;
     } else {
       client = &it->second;
+    }
+    if (!client->session->open() && !client->session->TryOpen(recorder_probe_.MatchedReaders(), receive_ns)) {
+      ++counters_.poses_before_open;  // the session waits for its recorders (Session::TryOpen)
+      continue;
     }
     if (client->has_pending && pose.sequence_number <= client->pending.sequence_number) {
       Count(pose.sequence_number == client->pending.sequence_number ? PoseVerdict::kDuplicate

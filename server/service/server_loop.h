@@ -57,6 +57,7 @@ struct ServerCounters {
   uint64_t sessions_closed = 0;
   uint64_t status_published = 0;
   uint64_t poses_after_leave = 0;   // poses of a client that left, ignored until it joins again
+  uint64_t poses_before_open = 0;   // poses of a session still waiting for the recorders (Session::TryOpen)
   uint64_t parallel_batches = 0;    // ticks that stepped two or more sessions on the pool
 };
 
@@ -93,6 +94,8 @@ class ServerLoop {
   void ProcessSessionControls();
   void ProcessPoses();
   void PublishStatus(int64_t now_ns);
+  // Opens the sessions whose recorders are ready (Session::TryOpen); true if any still waits.
+  bool OpenWaitingSessions(int64_t now_ns);
   Client* OpenSession(const std::string& client_id, const sim::TwoBodyModel& model);
   // The served scene called `scene_name` (the first one for ""), nullptr if none.
   void CloseSession(std::map<std::string, Client>::iterator it);  // counters kept, logged
@@ -120,6 +123,11 @@ class ServerLoop {
   Reader<hapco_idl_DevicePose> pose_reader_;
   Reader<hapco_idl_SessionControl> session_reader_;
   Writer<hapco_idl_ServerStatus> status_writer_;
+  // Never written: a contact-state writer in a partition of its own, so that its matched
+  // readers are the wildcard (hapco/client/*) readers, i.e. the recorders present. A new
+  // session opens once its own writer has matched as many (Session::TryOpen).
+  Publisher recorder_probe_publisher_;
+  Writer<hapco_idl_ContactStateFrame> recorder_probe_;
   WaitSet waitset_;
   std::map<std::string, Client> sessions_;
   std::set<std::string> left_clients_;  // sent SESSION_LEAVE and not joined since

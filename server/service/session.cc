@@ -34,8 +34,9 @@ Session::Session(std::string client_id, const sim::TwoBodyModel& model,
       physics_(physics),
       sim_(model),
       publisher_(participant, ClientPartition(client_id_)),
-      force_writer_(publisher_, force_topic),
+      force_topic_(&force_topic),
       contact_writer_(publisher_, contact_topic),
+      created_ns_(MonotonicNowNs()),
       frame_(MakeSample<hapco_idl_ContactStateFrame>()) {
   if (time_budget_s >= 0) sim_.parameters.time_budget_s = time_budget_s;
   SetClientId(force_.client_id, client_id_);
@@ -44,6 +45,13 @@ Session::Session(std::string client_id, const sim::TwoBodyModel& model,
       std::min<std::size_t>(model.tool_candidates().size() + model.obstacle_edge_nodes().size(),
                             hapco_idl_MAX_CONTACT_SAMPLES));
   ReserveContacts(frame_.get(), capacity);
+}
+
+bool Session::TryOpen(uint32_t recorders, int64_t now_ns) {
+  if (open()) return true;
+  if (contact_writer_.MatchedReaders() < recorders && now_ns - created_ns_ < kRecorderWaitNs) return false;
+  force_writer_.emplace(publisher_, *force_topic_);
+  return true;
 }
 
 PoseVerdict Session::Check(const hapco_idl_DevicePose& pose, int64_t receive_ns,
@@ -78,7 +86,7 @@ int64_t Session::StepAndPublish(const hapco_idl_DevicePose& pose, int64_t receiv
   force_.pose_verdict = hapco_idl_POSE_STEPPED;
   force_.ignored_poses = counters_.ignored_poses;
   force_.server_send_ns = MonotonicNowNs();
-  if (force_writer_.Write(force_) != DDS_RETCODE_OK) ++counters_.force_write_errors;
+  if (force_writer_->Write(force_) != DDS_RETCODE_OK) ++counters_.force_write_errors;
   // The contact frame goes after the force: the force is the latency-critical sample.
   FillContactFrame(pose.sequence_number);
   frame_->server_receive_ns = receive_ns;
@@ -120,7 +128,8 @@ void Session::NotifyIgnored(const hapco_idl_DevicePose& pose, int64_t receive_ns
   notice.pose_verdict = idl_verdict;
   notice.ignored_poses = counters_.ignored_poses;
   notice.server_send_ns = MonotonicNowNs();
-  if (force_writer_.Write(notice) == DDS_RETCODE_OK) {
+  if (!open()) return;
+  if (force_writer_->Write(notice) == DDS_RETCODE_OK) {
     ++counters_.ignored_notices;
   } else {
     ++counters_.force_write_errors;

@@ -4,6 +4,7 @@
 // with the force and contact-state writers. Created by the server thread when the client
 // joins (SESSION_JOIN or its first valid pose), never inside a listener callback.
 #include <cstdint>
+#include <optional>
 #include <memory>
 #include <string>
 
@@ -53,6 +54,16 @@ class Session {
 
   const std::string& client_id() const { return client_id_; }
 
+  // A session answers poses only once it is open: its force writer is created when its
+  // contact-state writer has matched `recorders` readers (the recorders present, so that no
+  // step of the session is missing from their recordings: with DDS-Security a new writer
+  // needs its keys exchanged, ~90 ms here) or kRecorderWaitNs after creation, whichever comes
+  // first. The client's Connect waits for the force writer, so it starts when the recorders
+  // are ready. Returns open().
+  bool TryOpen(uint32_t recorders, int64_t now_ns);
+  bool open() const { return force_writer_.has_value(); }
+  static constexpr int64_t kRecorderWaitNs = 500'000'000;
+
   // Classifies a pose against the limits and this session's stream (no state change except
   // the flood window, which counts every pose seen). receive_ns: server CLOCK_MONOTONIC.
   PoseVerdict Check(const hapco_idl_DevicePose& pose, int64_t receive_ns, const PoseLimits& limits);
@@ -85,8 +96,10 @@ class Session {
   SessionPhysics physics_;
   sim::TwoBodySession sim_;
   Publisher publisher_;
-  Writer<hapco_idl_FeedbackForce> force_writer_;
+  const Topic<hapco_idl_FeedbackForce>* force_topic_;
   Writer<hapco_idl_ContactStateFrame> contact_writer_;
+  std::optional<Writer<hapco_idl_FeedbackForce>> force_writer_;  // created by TryOpen
+  int64_t created_ns_;
   SamplePtr<hapco_idl_ContactStateFrame> frame_;  // reserved once, reused every step
   hapco_idl_FeedbackForce force_{};
   PoseStream stream_;  // flood bucket, order and jump checks (the fuzzed code, pose_intake.h)
