@@ -46,6 +46,8 @@
 
 #include <Eigen/Dense>
 
+#include "cli/command_line.h"
+#include "cli/run_main.h"
 #include "common/timer.h"
 #include "contact/problem.h"
 #include "contact/projection.h"
@@ -219,6 +221,8 @@ struct Row {
 struct Config {
   bool quick = false;
   std::string csv;
+  bool states_only = false;  // --states
+  bool sweeps_only = false;  // --sweeps
 };
 
 int Reps(int m) { return m <= 50 ? 7 : m <= 100 ? 5 : 3; }
@@ -355,36 +359,26 @@ void PrintTime(double s, bool ok) {
   }
 }
 
-}  // namespace
+constexpr const char* kDescription =
+    R"(The contact-solver benchmark of docs/contact-benchmark.md: time to fc3d tolerance (1e-4, 1e-6, 1e-8; cold and warm start) and the cost of one sweep against a dense W*r product, for every HapCo contact solver (and Siconos NSGS and DSFP when built with Siconos Numerics), on problems of m = 10 to 1000 contacts built from an elastic slab under a curved rigid punch. Prints tables (process CPU time), never asserts on time; the problem construction is described at the top of tests/bench/contact/contact_bench.cc.)";
 
-int main(int argc, char** argv) {
-  Config cfg;
-  bool states_only = false;
-  bool sweeps_only = false;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    if (a == "--quick") {
-      cfg.quick = true;
-    } else if (a == "--csv" && i + 1 < argc) {
-      cfg.csv = argv[++i];
-    } else if (a == "--gap-shape" && i + 1 < argc) {
-      g_gap_shape = std::stod(argv[++i]);
-    } else if (a == "--states") {
-      states_only = true;
-    } else if (a == "--sweeps") {
-      sweeps_only = true;
-    } else {
-      std::fprintf(stderr,
-                   "usage: %s [--quick] [--csv FILE] [--states] [--gap-shape G]\n"
-                   "  --quick      m = 10, 50, 100 only\n"
-                   "  --csv FILE   also write every number as CSV\n"
-                   "  --states     print the contact-state mix per m and exit\n"
-                   "  --sweeps     sweep / W*r ratios only\n"
-                   "  --gap-shape  punch profile g(d_max) = G delta (default 0.3)\n",
-                   argv[0]);
-      return 2;
-    }
-  }
+constexpr const char* kFooter = "Exit code: 0 when the benchmark ran, 1 on bad input.";
+
+// Defines the command line (docs/cli.md) and parses it; false: --help/--version answered.
+bool Parse(int argc, char** argv, Config* cfg) {
+  hapco::cli::CommandLine command("contact_bench", "[options]", kDescription, kFooter);
+  command.AddFlag("--quick", &cfg->quick, "m = 10, 50, 100 only (about 1 min)", "Run");
+  command.AddFlag("--states", &cfg->states_only, "print the contact-state mix per m only, no timings", "Run");
+  command.AddFlag("--sweeps", &cfg->sweeps_only, "sweep / W*r ratios only, no time to tolerance", "Run");
+  command.AddNumber("--gap-shape", &g_gap_shape, "G",
+                    "punch profile: the initial gap at the patch rim is g(d_max) = G delta, dimensionless "
+                    "(default 0.3)",
+                    "Problem", -HUGE_VAL, HUGE_VAL);
+  command.AddCsv(&cfg->csv, "also write every number as CSV (scripts/plot_contact_benchmark.py)");
+  return command.Parse(argc, argv);
+}
+
+int Run(const Config& cfg) {
 #ifdef HAPCO_HAVE_SICONOS
   numerics_set_verbose(0);
 #endif
@@ -457,7 +451,7 @@ int main(int argc, char** argv) {
                   scaled_prev.force_scale_n, hapco::contact::Fc3dError(p, warm));
       std::fflush(stdout);
     }
-    if (states_only) continue;
+    if (cfg.states_only) continue;
     const double cap = CapSeconds(m);
 #ifdef HAPCO_HAVE_SICONOS
     SiconosProblem sp(p);
@@ -511,7 +505,7 @@ int main(int argc, char** argv) {
     std::printf("  (sweep / W*r); local-uzawa inner steps per contact-sweep %.1f\n",
                 inner_per_contact);
     std::fflush(stdout);
-    if (sweeps_only) continue;
+    if (cfg.sweeps_only) continue;
 
     std::printf("%-6s %-5s %-20s |%s\n", "m", "start", "solver",
                 "  t(1e-4) s  iters   t(1e-6) s  iters   t(1e-8) s  iters");
@@ -610,4 +604,13 @@ int main(int argc, char** argv) {
     std::printf("wrote %s\n", cfg.csv.c_str());
   }
   return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  return hapco::cli::RunMain("contact_bench", [&] {
+    Config cfg;
+    return Parse(argc, argv, &cfg) ? Run(cfg) : 0;
+  });
 }

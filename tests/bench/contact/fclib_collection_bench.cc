@@ -1,4 +1,4 @@
-// fclib_collection_bench [--tol 1e-6,1e-8] [--max-seconds S] --csv OUT.csv FILE.hdf5...
+// fclib_collection_bench [--tol 1e-6,1e-8] [--max-cpu-s S] --csv OUT.csv FILE.hdf5...
 //
 // Time to tolerance of HapCo's contact solvers and Siconos Numerics' NSGS and nonsmooth Newton
 // (Alart–Curnier, NSN_AC) on FCLIB files written by other tools (local problems as stored;
@@ -6,13 +6,14 @@
 // reported apart and not counted). One judge for every solver: Siconos' fc3d_compute_error on
 // the file's own W (norm ‖q‖, as Siconos' drivers pass it). A solver whose own stop test passes
 // before the judge does is continued, warm-started, at a tenth of its tolerance, with the time
-// added, until the judge passes or max-seconds (CPU) is spent: a problem is solved when the
+// added, until the judge passes or --max-cpu-s is spent: a problem is solved when the
 // judge says so. Prints one line per run and writes the CSV that
 // scripts/plot_performance_profile.py reads (problem,solver,tolerance,seconds,converged,
 // iterations,error). Times are process CPU seconds. Never asserts on time.
 #include <time.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -24,6 +25,9 @@
 
 #include <Eigen/Dense>
 
+#include "cli/command_line.h"
+#include "cli/run_main.h"
+#include "common/error.h"
 #include "contact/solver.h"
 #include "delassus/delassus.h"
 #include "fclib/fclib_io.h"
@@ -110,43 +114,66 @@ struct Row {
   int iterations = 0;
 };
 
-std::vector<double> ParseList(const std::string& text) {
+struct Options {
+  std::vector<double> tolerances = {1e-6, 1e-8};
+  double max_cpu_s = 20.0;
+  std::string csv_path;
+  std::vector<std::string> files;
+};
+
+// "1e-6,1e-8" -> {1e-6, 1e-8}: every item a finite number > 0, else an error naming --tol.
+std::vector<double> ParseTolerances(const std::string& text) {
   std::vector<double> out;
   std::stringstream in(text);
   std::string item;
-  while (std::getline(in, item, ',')) out.push_back(std::atof(item.c_str()));
+  while (std::getline(in, item, ',')) {
+    char* end = nullptr;
+    const double value = std::strtod(item.c_str(), &end);
+    if (item.empty() || end != item.c_str() + item.size() || !std::isfinite(value) || !(value > 0)) {
+      throw hapco::InputError("--tol expects comma-separated numbers > 0, got '" + text + "'");
+    }
+    out.push_back(value);
+  }
+  if (out.empty()) throw hapco::InputError("--tol expects comma-separated numbers > 0, got '" + text + "'");
   return out;
 }
 
-}  // namespace
+constexpr const char* kDescription =
+    R"(Time to tolerance of HapCo's contact solvers (local-uzawa, global-uzawa-gs, reference) and Siconos Numerics' NSGS and nonsmooth Newton (Alart-Curnier, NSN_AC) on FCLIB files written by other tools; global problems are reduced by the flexibility method (its time reported apart, not counted). One judge for every solver: Siconos' fc3d_compute_error on the file's own W. A solver whose own stop test passes before the judge does is continued, warm-started, at a tenth of its tolerance, until the judge passes or --max-cpu-s is spent. Times are process CPU seconds. Prints one line per run and writes the CSV that scripts/plot_performance_profile.py reads; scripts/contact-collection runs the whole collection. Never asserts on time.)";
 
-int main(int argc, char** argv) {
-  std::vector<double> tolerances = {1e-6, 1e-8};
-  double max_seconds = 20.0;
-  std::string csv_path;
-  std::vector<std::string> files;
-  for (int k = 1; k < argc; ++k) {
-    const std::string arg = argv[k];
-    if (arg == "--help") {
-      std::puts("usage: fclib_collection_bench [--tol 1e-6,1e-8] [--max-seconds S] --csv OUT.csv FILE.hdf5...");
-      return 0;
-    } else if (arg == "--tol" && k + 1 < argc) {
-      tolerances = ParseList(argv[++k]);
-    } else if (arg == "--max-seconds" && k + 1 < argc) {
-      max_seconds = std::atof(argv[++k]);
-    } else if (arg == "--csv" && k + 1 < argc) {
-      csv_path = argv[++k];
-    } else if (arg.rfind("--", 0) == 0) {
-      std::fprintf(stderr, "fclib_collection_bench: unknown option %s\n", arg.c_str());
-      return 1;
-    } else {
-      files.push_back(arg);
-    }
-  }
-  if (files.empty() || csv_path.empty()) {
-    std::fprintf(stderr, "fclib_collection_bench: give --csv OUT.csv and FCLIB files (--help)\n");
-    return 1;
-  }
+constexpr const char* kFooter = "Exit code: 0 when the benchmark ran, 1 on bad input.";
+
+// Defines the command line (docs/cli.md) and parses it; false: --help/--version answered.
+bool Parse(int argc, char** argv, Options* o) {
+  hapco::cli::CommandLine command("fclib_collection_bench", "--csv OUT.csv [options] FILE.hdf5...", kDescription,
+                                  kFooter);
+  command.app()
+      .add_option("FILE", o->files, "FCLIB files (.hdf5) of local or global problems, at least one; a file that cannot be read is "
+                  "reported and skipped (give -- before names that start with '-')")
+      ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll)
+      ->group("Arguments");
+  std::string tolerances;
+  command.AddText("--tol", &tolerances, "X[,X...]",
+                  "fc3d tolerances of the judge, dimensionless, comma-separated (default 1e-6,1e-8)", "Solver");
+  command.AddNumber("--max-cpu-s", &o->max_cpu_s, "S",
+                    "CPU seconds per solver, problem and tolerance, continuations included (default 20)", "Solver",
+                    0, HUGE_VAL, true);
+  command.AddCsv(&o->csv_path,
+                 "one row per run (problem, solver, tolerance, seconds, converged, iterations, error), "
+                 "written row by row (required)");
+  command.Deprecate("--max-seconds", "--max-cpu-s");
+  if (!command.Parse(argc, argv)) return false;
+  if (!tolerances.empty()) o->tolerances = ParseTolerances(tolerances);
+  if (o->csv_path.empty()) throw hapco::InputError("--csv FILE is required (see --help)");
+  if (o->files.empty()) throw hapco::InputError("missing FILE argument (see --help)");
+  return true;
+}
+
+int Run(const Options& options) {
+  const std::vector<double>& tolerances = options.tolerances;
+  const double max_seconds = options.max_cpu_s;
+  const std::string& csv_path = options.csv_path;
+  const std::vector<std::string>& files = options.files;
   namespace contact = hapco::contact;
   namespace fclib = hapco::fclib;
   numerics_set_verbose(0);
@@ -221,4 +248,13 @@ int main(int argc, char** argv) {
   }
   std::printf("wrote %zu runs to %s\n", rows.size(), csv_path.c_str());
   return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  return hapco::cli::RunMain("fclib_collection_bench", [&] {
+    Options options;
+    return Parse(argc, argv, &options) ? Run(options) : 0;
+  });
 }

@@ -19,6 +19,8 @@
 
 #include <Eigen/Dense>
 
+#include "cli/command_line.h"
+#include "cli/run_main.h"
 #include "common/error.h"
 #include "common/timer.h"
 #include "io/scene_file.h"
@@ -136,30 +138,39 @@ PathSummary RunPath(const sim::TwoBodyModel& model, const PathSpec& spec, const 
   return summary;
 }
 
-int Run(int argc, char** argv) {
+struct Options {
   std::string out_dir = "free-interaction";
   bool with_tet10 = true;
   bool reference = false;
-  for (int i = 1; i < argc; ++i) {
-    const std::string arg = argv[i];
-    if (arg == "--out" && i + 1 < argc) {
-      out_dir = argv[++i];
-    } else if (arg == "--no-tet10") {
-      with_tet10 = false;
-    } else if (arg == "--reference") {
-      reference = true;
-    } else if (arg == "--help") {
-      std::printf("usage: free_interaction_study [--out DIR] [--no-tet10] [--reference]\n"
-                  "  --out DIR     per-path CSVs and summary.csv (default ./free-interaction)\n"
-                  "  --no-tet10    only the shipped Tet4 tool\n"
-                  "  --reference   also a refined reference (obstacle 30x6x6 Tet10, tool 6x6x3 Tet10,\n"
-                  "                global Uzawa, per-contact rho, 1e-8 m; ~1 GB) on the top-face\n"
-                  "                sweep and the presses, and each model's |F| error against it\n");
-      return 0;
-    } else {
-      throw InputError("unknown option " + arg + " (see --help)");
-    }
-  }
+};
+
+constexpr const char* kDescription =
+    R"(Forces along device paths that leave the scene's scripted footprint (docs/free-interaction.md): the whole top face at 3 mm depth, presses next to the clamps and at the free end, pushes against end and side faces, below the end and back; benchmarks 1 and 2, the shipped Tet4 tool and a Tet10 tool. Writes DIR/<scene>_<tool>_<path>.csv (one row per 0.1 mm step) and DIR/summary.csv, and prints a summary row per path (convergence, largest step-to-step |dF|/|F|, direction dependence, monotonic presses); scripts/plot_free_interaction.py draws them. Prints numbers, never asserts.)";
+
+constexpr const char* kFooter = "Exit code: 0 when the study ran, 1 on bad input.";
+
+// Defines the command line (docs/cli.md) and parses it; false: --help/--version answered.
+bool Parse(int argc, char** argv, Options* o) {
+  hapco::cli::CommandLine command("free_interaction_study", "[options]", kDescription, kFooter);
+  bool no_tet10 = false;
+  command.AddFlag("--no-tet10", &no_tet10, "only the shipped Tet4 tool", "Run");
+  command.AddFlag("--reference", &o->reference,
+                  "also a refined reference (obstacle 30x6x6 Tet10, tool 6x6x3 Tet10, global Uzawa, per-contact "
+                  "rho, 1e-8 m; ~1 GB) on the top-face sweep and the presses, and each model's |F| error against it",
+                  "Run");
+  command.AddText("--output", &o->out_dir, "DIR",
+                  "directory for the per-path CSVs and summary.csv, created if missing (default ./free-interaction)",
+                  hapco::cli::kGroupOutput);
+  command.Deprecate("--out", "--output");
+  if (!command.Parse(argc, argv)) return false;
+  o->with_tet10 = !no_tet10;
+  return true;
+}
+
+int Run(const Options& options) {
+  const std::string& out_dir = options.out_dir;
+  const bool with_tet10 = options.with_tet10;
+  const bool reference = options.reference;
   std::filesystem::create_directories(out_dir);
   std::printf("load average at start: %s\n", LoadAverage().c_str());
   std::FILE* summary_csv = std::fopen((out_dir + "/summary.csv").c_str(), "w");
@@ -278,10 +289,8 @@ int Run(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  try {
-    return Run(argc, argv);
-  } catch (const std::exception& error) {
-    std::fprintf(stderr, "free_interaction_study: %s\n", error.what());
-    return 1;
-  }
+  return hapco::cli::RunMain("free_interaction_study", [&] {
+    Options options;
+    return Parse(argc, argv, &options) ? Run(options) : 0;
+  });
 }

@@ -2,7 +2,7 @@
 // haptic pipeline, and runs the stability study (docs/stability.md). Writes small CSVs; the
 // plots are made by scripts/plot_paper_figures.py. Prints numbers, never asserts.
 //
-//   hapco_paper_study --out DIR [--study all|refcheck|fig67|fig8|fig9|stability] [--quick]
+//   hapco_paper_study --output DIR [--study all|refcheck|fig67|fig8|fig9|stability] [--quick]
 //
 // "paper" runs use the paper's settings (section 3.3.3): cold start r0 = 0, one
 // ρ = min_i 1/W_ii, and every threshold (ε₁, ε₂) equal to the "Uzawa error" ‖Δr‖/ρ.
@@ -23,6 +23,8 @@
 #include <Eigen/Dense>
 #include <time.h>
 
+#include "cli/command_line.h"
+#include "cli/run_main.h"
 #include "common/error.h"
 #include "common/timer.h"
 #include "contact/solver.h"
@@ -678,47 +680,50 @@ void StudyReferenceCheck(const Options& o) {
   std::fclose(w);
 }
 
-Options Parse(int argc, char** argv) {
-  Options o;
-  for (int i = 1; i < argc; ++i) {
-    const std::string arg = argv[i];
-    auto value = [&]() -> std::string {
-      if (i + 1 >= argc) throw hapco::InputError(arg + " needs a value");
-      return argv[++i];
-    };
-    if (arg == "--out") o.out_dir = value();
-    else if (arg == "--study") o.study = value();
-    else if (arg == "--scenes") o.scene_dir = value();
-    else if (arg == "--quick") o.quick = true;
-    else if (arg == "--help") {
-      std::puts("usage: hapco_paper_study --out DIR [--study all|refcheck|fig67|fig8|fig9|stability] [--quick] [--scenes DIR]");
-      std::exit(0);
-    } else {
-      throw hapco::InputError("unknown argument " + arg + " (see --help)");
-    }
-  }
-  if (o.out_dir.empty()) throw hapco::InputError("--out DIR is required");
+constexpr const char* kDescription =
+    R"(Reproduces the paper's figures 6-9 (section 3.3.3) with the two-body haptic pipeline and runs the stability study (docs/paper-comparison.md, docs/stability.md). Writes small CSVs into the --output directory; scripts/plot_paper_figures.py draws them (scripts/reproduce-paper-figures does both). Prints numbers, never asserts.)";
+
+constexpr const char* kFooter = "Exit code: 0 when the studies ran, 1 on bad input.";
+
+// Defines the command line (docs/cli.md) and parses it; false: --help/--version answered.
+bool Parse(int argc, char** argv, Options* o) {
+  hapco::cli::CommandLine command("hapco_paper_study", "--output DIR [options]", kDescription, kFooter);
+  command.AddChoice("--study", &o->study, {"all", "refcheck", "fig67", "fig8", "fig9", "stability"},
+                    "which study to run (default all): refcheck (the accuracy reference against the exact-local-solve "
+                    "NSGS solver), fig67, fig8, fig9 (the paper's figures), stability (docs/stability.md)",
+                    "Run");
+  command.AddFlag("--quick", &o->quick, "coarse meshes, short trajectories: a smoke run (ctest)", "Run");
+  command.AddText("--scenes", &o->scene_dir, "DIR",
+                  "directory holding benchmark1.txtpb and benchmark2.txtpb (default: proto/scenes of the "
+                  "source tree)",
+                  "Run");
+  command.AddText("--output", &o->out_dir, "DIR", "directory for the CSVs, created if missing (required)",
+                  hapco::cli::kGroupOutput);
+  command.Deprecate("--out", "--output");
+  if (!command.Parse(argc, argv)) return false;
+  if (o->out_dir.empty()) throw hapco::InputError("--output DIR is required (see --help)");
+  return true;
+}
+
+int Run(const Options& o) {
+  std::setvbuf(stdout, nullptr, _IOLBF, 0);  // line by line through `| tee`
   std::filesystem::create_directories(o.out_dir);
-  return o;
+  Stopwatch total;
+  const bool all = o.study == "all";
+  if (all || o.study == "refcheck") StudyReferenceCheck(o);
+  if (all || o.study == "fig67") StudyFig67(o);
+  if (all || o.study == "fig8") StudyFig8(o);
+  if (all || o.study == "fig9") StudyFig9(o);
+  if (all || o.study == "stability") StudyStability(o);
+  std::printf("\nhapco_paper_study: %s done in %.1f s\n", o.study.c_str(), total.ElapsedSeconds());
+  return 0;
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
-  try {
-    std::setvbuf(stdout, nullptr, _IOLBF, 0);  // line by line through `| tee`
-    const Options o = Parse(argc, argv);
-    Stopwatch total;
-    const bool all = o.study == "all";
-    if (all || o.study == "refcheck") StudyReferenceCheck(o);
-    if (all || o.study == "fig67") StudyFig67(o);
-    if (all || o.study == "fig8") StudyFig8(o);
-    if (all || o.study == "fig9") StudyFig9(o);
-    if (all || o.study == "stability") StudyStability(o);
-    std::printf("\nhapco_paper_study: %s done in %.1f s\n", o.study.c_str(), total.ElapsedSeconds());
-    return 0;
-  } catch (const std::exception& error) {
-    std::fprintf(stderr, "hapco_paper_study: %s\n", error.what());
-    return 1;
-  }
+  return hapco::cli::RunMain("hapco_paper_study", [&] {
+    Options options;
+    return Parse(argc, argv, &options) ? Run(options) : 0;
+  });
 }

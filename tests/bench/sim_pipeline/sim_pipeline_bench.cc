@@ -23,6 +23,8 @@
 
 #include <Eigen/Dense>
 
+#include "cli/command_line.h"
+#include "cli/run_main.h"
 #include "common/error.h"
 #include "common/memory.h"
 #include "common/timer.h"
@@ -123,44 +125,37 @@ void PrintRow(const char* name, const std::vector<double>& v) {
               1e6 * Percentile(v, 0.99), 1e6 * Percentile(v, 1.0));
 }
 
-Options Parse(int argc, char** argv) {
-  Options options;
-  for (int i = 1; i < argc; ++i) {
-    const std::string arg = argv[i];
-    auto value = [&]() -> std::string {
-      if (i + 1 >= argc) throw InputError(arg + " needs a value");
-      return argv[++i];
-    };
-    if (arg == "--scene") {
-      options.scene = value();
-    } else if (arg == "--repeats") {
-      options.repeats = std::max(1, std::atoi(value().c_str()));
-    } else if (arg == "--full-steps") {
-      options.full_steps = std::max(0, std::atoi(value().c_str()));
-    } else if (arg == "--steps") {
-      options.steps = std::max(0, std::atoi(value().c_str()));
-    } else if (arg == "--csv") {
-      options.csv = value();
-    } else if (arg == "--path") {
-      options.path = value();
-    } else if (arg == "--cold-mib") {
-      options.cold_mib = std::max(0, std::atoi(value().c_str()));
-    } else if (arg == "--help") {
-      std::printf("usage: sim_pipeline_bench [--scene FILE] [--repeats N] [--full-steps N] [--steps N] [--csv FILE] [--path scene|top-face] [--cold-mib M]\n"
-                  "  --repeats N     whole-trajectory runs of the precomputed mode (default 3)\n"
-                  "  --full-steps N  steps timed in full-solve mode, from step 1 (default 12; 0 = skip)\n"
-                  "  --steps N       trajectory steps per run (default: all)\n"
-                  "  --csv FILE      per-step rows of the last precomputed run\n"
-                  "  --path P        scene: the scene's trajectory (default); top-face: 3 mm press and a\n"
-                  "                  0.1 mm-step sweep over the whole top face\n"
-                  "  --cold-mib M    read M MiB of other data between steps (cold caches, as in the server;\n"
-                  "                  default 0)\n");
-      std::exit(0);
-    } else {
-      throw InputError("unknown option " + arg + " (see --help)");
-    }
-  }
-  return options;
+constexpr const char* kDescription =
+    R"(Per-step cost of the haptic step pipeline (detect, assemble, solve, update) on a scene: the precomputed mode over the whole trajectory, repeated (median, p99, max of the step and of each stage); the paper's per-step full solves on the first --full-steps steps against the precomputed mode on the same steps in the same run; the per-scene precomputation (time, operator bytes, peak RSS); heap allocations per step. The machine is shared: the load average is printed at start and end. Prints numbers only (docs/performance.md).)";
+
+constexpr const char* kFooter = "Exit code: 0 when the benchmark ran, 1 on bad input.";
+
+// Defines the command line (docs/cli.md) and parses it; false: --help/--version answered.
+bool Parse(int argc, char** argv, Options* options) {
+  hapco::cli::CommandLine command("sim_pipeline_bench", "[SCENE.txtpb] [options]", kDescription, kFooter);
+  command.app()
+      .add_option("SCENE", options->scene,
+                  "scene file (proto/scene.proto); default: proto/scenes/benchmark1.txtpb of the source tree")
+      ->group("Arguments");
+  command.AddInteger("--repeats", &options->repeats, "N",
+                     "whole-trajectory runs of the precomputed mode (default 3)", "Run", 1, 1000000);
+  command.AddInteger("--full-steps", &options->full_steps, "N",
+                     "steps timed in full-solve mode, from step 1 (about 1 s each on the default scene; default "
+                     "12; 0 = skip)",
+                     "Run", 0, 100000000);
+  command.AddInteger("--steps", &options->steps, "N", "trajectory steps per run (default 0 = all)", "Run", 0,
+                     100000000);
+  command.AddChoice("--path", &options->path, {"scene", "top-face"},
+                    "scene: the scene's trajectory (default); top-face: a 3 mm press and a 0.1 mm-step sweep over "
+                    "the whole top face (tool from x = 5 mm to 95 mm)",
+                    "Run");
+  command.AddInteger("--cold-mib", &options->cold_mib, "M",
+                     "read M MiB of other data between steps (cold caches, as in the server, where DDS, the "
+                     "clients and other sessions run between two 1 kHz ticks; default 0)",
+                     "Run", 0, 65536);
+  command.AddCsv(&options->csv, "per-step rows of the last precomputed run");
+  command.Deprecate("--scene", "");
+  return command.Parse(argc, argv);
 }
 
 int Run(const Options& options) {
@@ -274,10 +269,8 @@ int Run(const Options& options) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  try {
-    return Run(Parse(argc, argv));
-  } catch (const std::exception& error) {
-    std::fprintf(stderr, "sim_pipeline_bench: %s\n", error.what());
-    return 1;
-  }
+  return hapco::cli::RunMain("sim_pipeline_bench", [&] {
+    Options options;
+    return Parse(argc, argv, &options) ? Run(options) : 0;
+  });
 }

@@ -15,7 +15,7 @@
 //   discretization error = e(converged run of the model, converged run of the finest model)
 //   total error          = e(run, converged run of the finest model)
 // Writes runs.csv (one row per model × solver × tolerance), models.csv (one row per model)
-// and forces.csv (F_k of every converged run) to --out. Progress lines on stderr.
+// and forces.csv (F_k of every converged run) to --output DIR. Progress lines on stderr.
 #include <time.h>
 
 #include <algorithm>
@@ -29,6 +29,8 @@
 
 #include <Eigen/Dense>
 
+#include "cli/command_line.h"
+#include "cli/run_main.h"
 #include "common/error.h"
 #include "common/memory.h"
 #include "common/timer.h"
@@ -279,25 +281,33 @@ int Run(const Options& options) {
   return 0;
 }
 
+constexpr const char* kDescription =
+    R"(Speed against accuracy of the haptic pipeline (docs/speed-accuracy.md): for every solver x tolerance x obstacle mesh x element order of the scene, the contact force error against converged references versus the CPU time per step. Writes runs.csv, models.csv and forces.csv into the --output directory; progress lines on stderr. scripts/reproduce-speed-accuracy runs the full study and draws its charts; --quick is a two-model smoke run.)";
+
+constexpr const char* kFooter = "Exit code: 0 when the study ran, 1 on bad input.";
+
+// Defines the command line (docs/cli.md) and parses it; false: --help/--version answered.
+bool Parse(int argc, char** argv, Options* options) {
+  hapco::cli::CommandLine command("hapco_speed_accuracy_study", "[SCENE.txtpb] [options]", kDescription, kFooter);
+  command.app()
+      .add_option("SCENE", options->scene,
+                  "scene file (proto/scene.proto) whose meshes and orders are varied (default: "
+                  "proto/scenes/benchmark1.txtpb of the source tree)")
+      ->group("Arguments");
+  command.AddFlag("--quick", &options->quick, "two models, two solvers, two tolerances: a smoke run (ctest)", "Run");
+  command.AddText("--output", &options->out, "DIR",
+                  "directory for runs.csv, models.csv and forces.csv, created if missing (default ./speed_accuracy)",
+                  hapco::cli::kGroupOutput);
+  command.Deprecate("--out", "--output");
+  command.Deprecate("--scene", "");
+  return command.Parse(argc, argv);
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
-  try {
+  return hapco::cli::RunMain("hapco_speed_accuracy_study", [&] {
     Options options;
-    for (int i = 1; i < argc; ++i) {
-      const std::string arg = argv[i];
-      if (arg == "--quick") {
-        options.quick = true;
-      } else if ((arg == "--out" || arg == "--scene") && i + 1 < argc) {
-        (arg == "--out" ? options.out : options.scene) = argv[++i];
-      } else {
-        std::fprintf(stderr, "usage: hapco_speed_accuracy_study [--scene FILE] [--out DIR] [--quick]\n");
-        return 1;
-      }
-    }
-    return Run(options);
-  } catch (const std::exception& error) {
-    std::fprintf(stderr, "hapco_speed_accuracy_study: %s\n", error.what());
-    return 1;
-  }
+    return Parse(argc, argv, &options) ? Run(options) : 0;
+  });
 }

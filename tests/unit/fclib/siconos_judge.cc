@@ -4,19 +4,20 @@
 //                   driver passes), u recomputed by Siconos;
 //   global problem: gfc3d_compute_error(M, H, q = f, b = w as Siconos reads FCLIB files, r, u,
 //                   v) with norms ‖f‖ and ‖w‖.
-// Prints the error and exits 0 when it is <= TOL, 1 otherwise (2 on bad input). The problem
+// Prints the error and exits 0 when it is <= TOL, 2 otherwise (1 on bad input). The problem
 // and solution are read with HapCo's FCLIB reader (Siconos' own FCLIB interface is compiled
 // out in Debian's package); the matrices are handed to Siconos dense, as stored.
+#include <cmath>
 #include <cstdio>
-#include <cstdlib>
 #include <cstring>
-#include <exception>
-#include <stdexcept>
 #include <string>
 #include <vector>
 
 #include <Eigen/Dense>
 
+#include "cli/command_line.h"
+#include "cli/run_main.h"
+#include "common/error.h"
 #include "fclib/fclib_io.h"
 
 extern "C" {
@@ -44,7 +45,7 @@ double JudgeLocal(const std::string& path) {
   const hapco::contact::ContactProblem& stored =
       details.stored_problem.num_contacts() > 0 ? details.stored_problem : symmetric;
   const auto solution = fclib::ReadFclibSolution(path);
-  if (!solution) throw std::runtime_error(path + " holds no /solution");
+  if (!solution) throw hapco::InputError(path + " holds no /solution");
   Eigen::VectorXd q = stored.free_displacement_m, mu = stored.friction_coefficient;
   Eigen::VectorXd r = solution->force_n, u = Eigen::VectorXd::Zero(q.size());
   FrictionContactProblem problem{};
@@ -67,7 +68,7 @@ double JudgeGlobal(const std::string& path) {
   namespace fclib = hapco::fclib;
   const hapco::contact::GlobalContactProblem global = fclib::ReadFclibGlobalProblem(path);
   const auto solution = fclib::ReadFclibGlobalSolution(path);
-  if (!solution) throw std::runtime_error(path + " holds no /solution");
+  if (!solution) throw hapco::InputError(path + " holds no /solution");
   Eigen::VectorXd f = global.f, w = global.w, mu = global.mu;
   Eigen::VectorXd r = solution->force, v = solution->velocity, u = solution->local_velocity;
   GlobalFrictionContactProblem* problem = globalFrictionContactProblem_new();
@@ -92,23 +93,41 @@ double JudgeGlobal(const std::string& path) {
   return error;
 }
 
+struct Options {
+  std::string path;
+  double tolerance = 0;
+};
+
+constexpr const char* kDescription =
+    R"(Judges the solution stored in an FCLIB file with Siconos Numerics' own error functions, an implementation independent of HapCo's: a local problem with fc3d_compute_error (W as stored, norm |q|), a global one with gfc3d_compute_error (M, H, f, w; norms |f| and |w|). Prints the error and whether it is within TOL.)";
+
+constexpr const char* kFooter = "Exit code: 0 when the error is <= TOL, 2 when it is not, 1 on bad input.";
+
+// Defines the command line (docs/cli.md) and parses it; false: --help/--version answered.
+bool Parse(int argc, char** argv, Options* o) {
+  hapco::cli::CommandLine command("siconos-judge", "FILE.hdf5 TOL", kDescription, kFooter);
+  command.AddText("FILE", &o->path, "", "FCLIB file with a /solution (hapco-solve --output)", "Arguments")
+      ->required();
+  command.AddNumber("TOL", &o->tolerance, "", "largest accepted Siconos error, dimensionless", "Arguments", 0,
+                    HUGE_VAL)
+      ->required();
+  return command.Parse(argc, argv);
+}
+
+int Run(const Options& o) {
+  const double error = hapco::fclib::ReadFclibKind(o.path) == hapco::fclib::FclibKind::kGlobal ? JudgeGlobal(o.path)
+                                                                                                : JudgeLocal(o.path);
+  const bool ok = error <= o.tolerance;
+  std::printf("%s: error %.3e %s tolerance %.1e\n", ok ? "solved" : "NOT solved", error, ok ? "<=" : ">",
+              o.tolerance);
+  return ok ? 0 : 2;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
-  if (argc != 3) {
-    std::fprintf(stderr, "usage: siconos-judge FILE.hdf5 TOL\n");
-    return 2;
-  }
-  try {
-    const std::string path = argv[1];
-    const double tolerance = std::atof(argv[2]);
-    const double error = hapco::fclib::ReadFclibKind(path) == hapco::fclib::FclibKind::kGlobal ? JudgeGlobal(path)
-                                                                                                : JudgeLocal(path);
-    const bool ok = error <= tolerance;
-    std::printf("%s: error %.3e %s tolerance %.1e\n", ok ? "solved" : "NOT solved", error, ok ? "<=" : ">", tolerance);
-    return ok ? 0 : 1;
-  } catch (const std::exception& error) {
-    std::fprintf(stderr, "siconos-judge: %s\n", error.what());
-    return 2;
-  }
+  return hapco::cli::RunMain("siconos-judge", [&] {
+    Options options;
+    return Parse(argc, argv, &options) ? Run(options) : 0;
+  });
 }
