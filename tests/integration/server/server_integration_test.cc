@@ -259,9 +259,11 @@ TEST(ServerProcess, SessionsSteppedOnSeveralThreadsGetTheForcesOfASingleThreadRe
   std::printf("%s", summary.c_str());
   ASSERT_NE(summary.find("on 3 threads"), std::string::npos) << summary;
   // "N steps (M ticks stepped several sessions on 3 threads)": the parallel path really ran.
+  // M depends on how the four clients' 1 kHz phases line up (15 to several dozen seen; 15 in
+  // a CI run on a loaded machine), so only a margin above "a few" is asserted.
   const auto open = summary.find(" steps (");
   ASSERT_NE(open, std::string::npos) << summary;
-  EXPECT_GT(std::stoll(summary.substr(open + 8)), 20) << summary;
+  EXPECT_GT(std::stoll(summary.substr(open + 8)), 5) << summary;
 
   const sim::TwoBodyModel model(io::LoadSceneFile(kScene));
   std::map<std::string, std::unique_ptr<sim::TwoBodySession>> replays;
