@@ -1,0 +1,145 @@
+// The local contact model (sim/local_model.h) against finite differences of full steps: from
+// the same previous state, a step to d_k + h e_j changes the device force by about K h e_j.
+// Frictionless (every active contact slides with r_t = 0) and mu = 10 (every active contact
+// sticks) presses, in all six directions; the error is measured against |K| h (the spectral
+// norm), so a direction the model calls stiffless is not divided by zero. The lateral error of
+// the sticking press (about 1 %) is the slope of the deformed obstacle under the moving contact
+// points, which the model leaves out (local_model.h).
+#include "sim/local_model.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <vector>
+
+#include "sim/step_pipeline.h"
+
+namespace hapco::sim {
+namespace {
+
+SceneSpec CoarseScene(double friction) {
+  SceneSpec scene;
+  scene.name = "coarse";
+  scene.obstacle.name = "red";
+  scene.obstacle.box = {Eigen::Vector3d::Zero(), Eigen::Vector3d(0.10, 0.02, 0.02), Eigen::Vector3i(10, 2, 2),
+                        fem::ElementOrder::kTet4};
+  scene.obstacle.material = {3.0e6, 0.3};
+  scene.obstacle.clamped_faces = {fem::BoxFace::kXMin, fem::BoxFace::kXMax};
+  scene.tool.name = "green";
+  scene.tool.box = {Eigen::Vector3d(0.04, 0.0, 0.02), Eigen::Vector3d(0.02, 0.02, 0.01), Eigen::Vector3i(2, 2, 1),
+                    fem::ElementOrder::kTet4};
+  scene.tool.material = {8.0e7, 0.3};
+  scene.tool.driven_face = fem::BoxFace::kZMax;
+  scene.friction_coefficient = friction;
+  scene.activation_gap_m = 5e-4;
+  scene.solver = contact::SolverKind::kReferenceNsgs;
+  scene.solver_parameters.global_tolerance_m = 1e-13;  // far below h = 1e-7 m times |W| / |W|
+  scene.solver_parameters.fc3d_tolerance = 1e-12;
+  scene.solver_parameters.max_iterations = 100000;
+  scene.solver_parameters.warm_start = true;
+  return scene;
+}
+
+// Press 0.5 mm in 20 steps, then slide +x by `slide_steps` steps of 20 um.
+std::vector<Eigen::Vector3d> PressAndSlide(int slide_steps) {
+  std::vector<Eigen::Vector3d> path;
+  for (int k = 1; k <= 20; ++k) path.emplace_back(0, 0, -2.5e-5 * k);
+  for (int k = 1; k <= slide_steps; ++k) path.emplace_back(2e-5 * k, 0, -5e-4);
+  return path;
+}
+
+// The force of the last step of `path` with its last pose moved by `offset_m`, from the same
+// previous state (a fresh session replays the others).
+Eigen::Vector3d ForceWithLastPoseMoved(const TwoBodyModel& model, const std::vector<Eigen::Vector3d>& path,
+                                       const Eigen::Vector3d& offset_m) {
+  TwoBodySession session(model);
+  for (std::size_t k = 0; k + 1 < path.size(); ++k) session.Step(path[k]);
+  const StepOutput& out = session.Step(path.back() + offset_m);
+  EXPECT_EQ(out.status, contact::SolverStatus::kConverged);
+  return out.device_force_n;
+}
+
+struct Linearized {
+  LocalContactModel model;
+  int contacts = 0;
+};
+
+Linearized LinearizeAt(const TwoBodyModel& model, const std::vector<Eigen::Vector3d>& path) {
+  TwoBodySession session(model);
+  for (const Eigen::Vector3d& d : path) session.Step(d);
+  EXPECT_EQ(session.last_output().status, contact::SolverStatus::kConverged);
+  return {LinearizeLastStep(session), session.last_output().num_contacts};
+}
+
+// |F(d + h e) - F(d) - K h e| relative to |K h e| for the 6 directions ±x, ±y, ±z.
+void ExpectMatchesFiniteDifferences(const TwoBodyModel& model, const std::vector<Eigen::Vector3d>& path,
+                                    const LocalContactModel& local, double h_m, double tolerance) {
+  double worst = 0;
+  for (int j = 0; j < 3; ++j) {
+    for (double sign : {1.0, -1.0}) {
+      const Eigen::Vector3d offset = sign * h_m * Eigen::Vector3d::Unit(j);
+      const Eigen::Vector3d full = ForceWithLastPoseMoved(model, path, offset);
+      const Eigen::Vector3d predicted = local.ForceAt(path.back() + offset);
+      const double scale = local.stiffness_n_per_m.jacobiSvd().singularValues()(0) * h_m;
+      EXPECT_LT((full - predicted).norm(), tolerance * scale)
+          << "direction " << j << " sign " << sign << ": full " << full.transpose() << ", model "
+          << predicted.transpose() << ", K h e " << (local.stiffness_n_per_m * offset).transpose();
+      worst = std::max(worst, (full - predicted).norm() / scale);
+    }
+  }
+  std::printf("largest |F_full - F_model| / (|K| h) over +-x, +-y, +-z: %.2e (|K| = %.4g N/m)\n", worst,
+              local.stiffness_n_per_m.jacobiSvd().singularValues()(0));
+}
+
+TEST(LocalContactModel, FrictionlessPressMatchesFiniteDifferencesAndIsASymmetricSpring) {
+  const TwoBodyModel model(CoarseScene(0.0));
+  const auto path = PressAndSlide(0);
+  const Linearized at = LinearizeAt(model, path);
+  ASSERT_GT(at.model.sliding, 0);
+  EXPECT_EQ(at.model.sticking, 0);
+  const Eigen::Matrix3d& k = at.model.stiffness_n_per_m;
+  EXPECT_LT(k(2, 2), 0.0) << "pressing further must push back harder:\n" << k;
+  EXPECT_LT((k - k.transpose()).norm(), 1e-8 * k.norm()) << k;
+  EXPECT_LE(Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(0.5 * (k + k.transpose())).eigenvalues().maxCoeff(),
+            1e-9 * k.norm())
+      << "negative semi-definite:\n" << k;
+  ExpectMatchesFiniteDifferences(model, path, at.model, 1e-7, 5e-3);  // measured 0.12 %
+}
+
+TEST(LocalContactModel, StickingPressMatchesFiniteDifferencesInEveryDirection) {
+  const TwoBodyModel model(CoarseScene(10.0));
+  const auto path = PressAndSlide(0);
+  const Linearized at = LinearizeAt(model, path);
+  ASSERT_GT(at.model.sticking, 0);
+  EXPECT_LE(at.model.sliding, 1) << "mu = 10: at most a contact at the edge with almost no force slides";
+  const Eigen::Matrix3d& k = at.model.stiffness_n_per_m;
+  EXPECT_LT(k(0, 0), 0.0) << "a sticking contact resists a sideways push:\n" << k;
+  EXPECT_LT(k(1, 1), 0.0) << k;
+  ExpectMatchesFiniteDifferences(model, path, at.model, 1e-7, 0.03);  // measured 1.2 %
+}
+
+TEST(LocalContactModel, ThePressModelPredictsAFurtherPressFarBetterThanHoldingTheForce) {
+  // What a client gains: 5 um further in, the model's force against the held force.
+  const TwoBodyModel model(CoarseScene(10.0));
+  const auto path = PressAndSlide(0);
+  const Linearized at = LinearizeAt(model, path);
+  const Eigen::Vector3d further(0, 0, -5e-6);
+  const Eigen::Vector3d full = ForceWithLastPoseMoved(model, path, further);
+  const double held_error = (full - at.model.device_force_n).norm();
+  const double model_error = (full - at.model.ForceAt(path.back() + further)).norm();
+  EXPECT_GT(held_error, 0.01) << "5 um must change the force measurably";
+  EXPECT_LT(model_error, 0.05 * held_error) << "model " << model_error << " N, held " << held_error << " N";
+}
+
+TEST(LocalContactModel, NoContactGivesNoStiffness) {
+  const TwoBodyModel model(CoarseScene(0.3));
+  TwoBodySession session(model);
+  session.Step(Eigen::Vector3d(0, 0, 0.004));  // lifted 4 mm: nothing within reach
+  const LocalContactModel local = LinearizeLastStep(session);
+  EXPECT_EQ(local.stiffness_n_per_m, Eigen::Matrix3d::Zero());
+  EXPECT_EQ(local.device_force_n, Eigen::Vector3d::Zero());
+}
+
+}  // namespace
+}  // namespace hapco::sim
