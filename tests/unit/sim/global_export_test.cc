@@ -15,25 +15,13 @@
 #include "delassus/delassus.h"
 #include "fclib/fclib_io.h"
 #include "sim/step_pipeline.h"
+#include "coarse_test_scene.h"
 
 namespace hapco::sim {
 namespace {
 
 SceneSpec CoarseScene() {
-  SceneSpec scene;
-  scene.name = "coarse";
-  scene.obstacle.name = "red";
-  scene.obstacle.box = {Eigen::Vector3d::Zero(), Eigen::Vector3d(0.10, 0.02, 0.02), Eigen::Vector3i(10, 2, 2),
-                        fem::ElementOrder::kTet4};
-  scene.obstacle.material = {3.0e6, 0.3};
-  scene.obstacle.clamped_faces = {fem::BoxFace::kXMin, fem::BoxFace::kXMax};
-  scene.tool.name = "green";
-  scene.tool.box = {Eigen::Vector3d(0.04, 0.0, 0.02), Eigen::Vector3d(0.02, 0.02, 0.01), Eigen::Vector3i(2, 2, 1),
-                    fem::ElementOrder::kTet4};
-  scene.tool.material = {8.0e7, 0.3};
-  scene.tool.driven_face = fem::BoxFace::kZMax;
-  scene.friction_coefficient = 0.3;
-  scene.activation_gap_m = 5e-4;
+  SceneSpec scene = testing::CoarseTestScene(0.3);
   scene.solver = contact::SolverKind::kReferenceNsgs;
   scene.solver_parameters.global_tolerance_m = 1e-14;
   scene.solver_parameters.fc3d_tolerance = 1e-13;
