@@ -202,6 +202,9 @@ class Reader {
     CheckReturn(rc, "dds_set_listener");
     callback_ = std::move(holder);  // the previous callback is no longer referenced
   }
+  // Removes the listener; returns once no callback runs any more (dds_set_listener waits for
+  // the callbacks in progress), so what the callback uses may be destroyed afterwards.
+  void ClearListener() noexcept { dds_set_listener(entity_.handle(), nullptr); }
 
  private:
   static void OnDataAvailable(dds_entity_t /*reader*/, void* arg) {
