@@ -359,9 +359,7 @@ int Run(const Options& o) {
   // Secured: every participant of this process runs as one identity, loadtest-<prefix>
   // (Cyclone 0.10.2 checks all secured participants of a process against one participant's
   // permissions; docs/security.md).
-  const hapco::service::SecurityIdentity identity =
-      o.security_dir.empty() ? hapco::service::SecurityIdentity{}
-                             : hapco::service::SecurityIdentity{o.security_dir, "loadtest-" + o.prefix};
+  const hapco::service::SecurityIdentity identity{o.security_dir, "loadtest-" + o.prefix};  // disabled without --security
   StatusMonitor status(o.domain, identity, t0);
   std::vector<std::unique_ptr<ClientRun>> runs;
   for (int i = 1; i <= o.clients; ++i) {

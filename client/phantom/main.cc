@@ -111,7 +111,7 @@ int Run(const Options& o) {
   phantom::ClientConfig config;
   config.client_id = o.client_id;
   config.domain = o.domain;
-  if (!o.security_dir.empty()) config.security = {o.security_dir, o.client_id};
+  config.security = {o.security_dir, o.client_id};  // disabled without --security
   config.mode = o.mode == "hand" ? phantom::DriveMode::kHand : phantom::DriveMode::kKinematic;
   config.trajectory = LoadTrajectory(o, scene);
   const int trajectory_ticks = static_cast<int>(config.trajectory.size()) - 1;

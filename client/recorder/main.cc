@@ -332,8 +332,7 @@ int Run(const Options& o) {
   Recorder recorder(&writer);
 
   using namespace hapco::service;
-  Participant participant(o.domain, o.security_dir.empty() ? hapco::service::SecurityIdentity{}
-                                                           : hapco::service::SecurityIdentity{o.security_dir, "recorder"});
+  Participant participant(o.domain, SecurityIdentity{o.security_dir, "recorder"});  // disabled without --security
   Topic<hapco_idl_ContactStateFrame> frame_topic(participant);
   Topic<hapco_idl_FeedbackForce> force_topic(participant);
   Topic<hapco_idl_ServerStatus> status_topic(participant);

@@ -32,8 +32,6 @@ bool Parse(int argc, char** argv, Options* options) {
   command.app()
       .add_option("RECORDING", options->path, "a HapCo recording (proto/recording.proto)")
       ->group("Arguments");  // checked after parsing: an unknown option is reported first
-  std::vector<std::string> more_recordings;  // refused below with a message of its own
-  command.app().add_option("MORE", more_recordings)->multi_option_policy(CLI::MultiOptionPolicy::TakeAll)->group("");
   command.AddCsv(&options->csv_path,
                  "steps as CSV, one row per step of every client (client_id column; units in the header; "
                  "contacts_missing = 1: the step's frame was lost, written from its force alone)");
@@ -43,7 +41,6 @@ bool Parse(int argc, char** argv, Options* options) {
                   hapco::cli::kGroupOutput);
   if (!command.Parse(argc, argv)) return false;
   if (options->path.empty()) throw hapco::InputError("missing RECORDING argument (see --help)");
-  if (!more_recordings.empty()) throw hapco::InputError("only one recording is accepted (see --help)");
   return true;
 }
 

@@ -34,14 +34,11 @@ struct Options {
 bool Parse(int argc, char** argv, Options* options) {
   hapco::cli::CommandLine command("hapco-scene", "SCENE.txtpb [options]", kDescription, kFooter);
   command.AddScene(&options->scene_path);
-  std::vector<std::string> more_scenes;  // refused below with a message of its own
-  command.app().add_option("MORE", more_scenes)->multi_option_policy(CLI::MultiOptionPolicy::TakeAll)->group("");
   command.AddFlag("--no-compliance", &options->no_compliance,
                   "stop after the factorisations: no contact surfaces, compliance or unit fields (faster on very "
                   "fine meshes)",
                   "Precomputation");
   if (!command.Parse(argc, argv)) return false;
-  if (!more_scenes.empty()) throw hapco::InputError("only one scene file is accepted (see --help)");
   return true;
 }
 

@@ -124,7 +124,7 @@ bool Parse(int argc, char** argv, Options* options) {
       physics == "none" ? hapco::service::SessionPhysics::kNone : hapco::service::SessionPhysics::kContact;
   if (time_budget_ms >= 0) options->server.time_budget_s = time_budget_ms * 1e-3;
   options->server.log = !quiet;
-  if (!security_dir.empty()) options->server.security = {security_dir, "server"};
+  options->server.security = {security_dir, "server"};  // disabled when security_dir is empty
   return true;
 }
 

@@ -52,8 +52,6 @@ struct Options {
 bool Parse(int argc, char** argv, Options* options) {
   hapco::cli::CommandLine command("hapco-sim", "SCENE.txtpb [options]", kDescription, kFooter);
   command.AddScene(&options->scene_path);
-  std::vector<std::string> more_scenes;  // refused below with a message of its own
-  command.app().add_option("MORE", more_scenes)->multi_option_policy(CLI::MultiOptionPolicy::TakeAll)->group("");
   command.AddSolver(&options->solver_name, "the scene's solver");
   command.AddNumber("--paper-tol-m", &options->tolerance_m, "X",
                     "the paper's stop test ||dr||/rho < X, m (default: the scene's solver.global_tolerance_m)",
@@ -112,7 +110,6 @@ bool Parse(int argc, char** argv, Options* options) {
   command.Deprecate("--mode", "--compliance");
   if (!command.Parse(argc, argv)) return false;
 
-  if (!more_scenes.empty()) throw hapco::InputError("only one scene file is accepted (see --help)");
   if (mu->count() > 0 && !(options->friction >= 0 && options->friction <= hapco::sim::kMaxFrictionCoefficient)) {
     char message[128];
     std::snprintf(message, sizeof message, "--mu must be in [0, %g] as in a scene file, got %g",

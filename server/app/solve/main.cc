@@ -55,8 +55,6 @@ bool Parse(int argc, char** argv, Options* options) {
       .add_option("PROBLEM", options->problem_path, "FCLIB file with a local (/fclib_local) or global "
                                                     "(/fclib_global) friction-contact problem")
       ->group("Arguments");  // checked after parsing: an unknown option is reported first
-  std::vector<std::string> more_problems;  // refused below with a message of its own
-  command.app().add_option("MORE", more_problems)->multi_option_policy(CLI::MultiOptionPolicy::TakeAll)->group("");
   std::string solver = "reference";
   command.AddSolver(&solver, "reference, Gauss-Seidel with an exact local solve");
   command.AddNumber("--tol", &options->fc3d_tolerance, "X",
@@ -83,9 +81,6 @@ bool Parse(int argc, char** argv, Options* options) {
 
   if (options->problem_path.empty()) {
     throw hapco::InputError("no problem file given (usage: hapco-solve PROBLEM.hdf5, see --help)");
-  }
-  if (!more_problems.empty()) {
-    throw hapco::InputError("one problem file only; unexpected '" + more_problems.front() + "'");
   }
   options->solver = hapco::contact::ParseSolverKind(solver);
   if (paper->count() > 0) options->paper_tolerance = paper_tolerance;

@@ -50,8 +50,7 @@ dds_duration_t Seconds(double s) { return static_cast<dds_duration_t>(s * 1e9); 
 
 int Run(const Options& o) {
   namespace svc = hapco::service;
-  svc::Participant participant(o.domain, o.security_dir.empty() ? svc::SecurityIdentity{}
-                                                               : svc::SecurityIdentity{o.security_dir, "monitor"});
+  svc::Participant participant(o.domain, svc::SecurityIdentity{o.security_dir, "monitor"});  // disabled without --security
   svc::Topic<hapco_idl_ServerStatus> topic(participant);
   svc::Subscriber subscriber(participant);
   svc::Reader<hapco_idl_ServerStatus> reader(subscriber, topic);
