@@ -17,6 +17,12 @@ namespace hapco::sim {
 // i.e. three or more cache lines, and the step's cost was those misses, not the arithmetic
 // (docs/performance.md). Here a block is 72 contiguous bytes (at most two lines) and a run of
 // consecutive nodes is one stream. Same values, same bytes, same precision as the dense C.
+// Releases BlockedCompliance's pages (mmap'ed: see AllocateZeroed).
+struct CompliancePagesUnmapper {
+  std::size_t bytes = 0;
+  void operator()(double* memory) const;
+};
+
 class BlockedCompliance {
  public:
   BlockedCompliance() = default;
@@ -34,6 +40,8 @@ class BlockedCompliance {
   Eigen::Map<const Eigen::Matrix3d> block(int i, int j) const {
     return Eigen::Map<const Eigen::Matrix3d>(data_.get() + Offset(i, j));
   }
+  // The blocks (0..n-1, j): 9 n consecutive doubles.
+  const double* column_data(int j) const { return data_.get() + Offset(0, j); }
   // The dense matrix again (tests and small bodies only: allocates 72 n² bytes).
   Eigen::MatrixXd ToDense() const;
 
@@ -41,8 +49,11 @@ class BlockedCompliance {
   std::size_t Offset(int i, int j) const {
     return 9 * (static_cast<std::size_t>(j) * static_cast<std::size_t>(nodes_) + static_cast<std::size_t>(i));
   }
+  using Storage = std::unique_ptr<double[], CompliancePagesUnmapper>;
+  static Storage AllocateZeroed(std::size_t count);
+
   int nodes_ = 0;
-  std::unique_ptr<double[]> data_;
+  Storage data_;
 };
 
 }  // namespace hapco::sim

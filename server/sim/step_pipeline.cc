@@ -88,7 +88,9 @@ TwoBodySession::TwoBodySession(const TwoBodyModel& model, SolveMode mode)
   workspace_.Reserve(max_contacts_, parameters.max_iterations);
   result_.Reserve(max_contacts_, parameters.max_iterations);
   region_.reserve(n_obstacle);
+  region_free_.reserve(n_obstacle);
   region_runs_.reserve(n_obstacle);
+  loaded_runs_.reserve(n_obstacle);
   cell_moved_m_ = Eigen::VectorXd::Zero(3 * obstacle_surface_.num_cells);
   tool_loaded_.reserve(n_tool);
   previous_ids_.reserve(static_cast<std::size_t>(max_contacts_));
@@ -178,7 +180,20 @@ void TwoBodySession::BroadPhase(const Eigen::Vector3d& increment_m) {
   const auto& triangles = obstacle_surface_.triangles;
   const auto& node_index = obstacle_surface_.node_index;
   const auto& node_cell = obstacle_surface_.node_cell;
+  // Most faces are far from the tool: the largest bound of any cell rules them out with one
+  // box test, before their own nodes' bounds are looked up.
+  Eigen::Vector3d moved_anywhere = Eigen::Vector3d::Zero();
+  for (int cell = 0; cell < obstacle_surface_.num_cells; ++cell) {
+    moved_anywhere = moved_anywhere.cwiseMax(cell_moved_m_.segment<3>(3 * cell));
+  }
+  const Eigen::Vector3d far_lo = lo.array() - (moved_anywhere.array() + near_m);
+  const Eigen::Vector3d far_hi = hi.array() + (moved_anywhere.array() + near_m);
   for (std::size_t t = 0; t < triangles.size(); ++t) {
+    if (!((obstacle_surface_.triangle_min_m[t].array() <= far_hi.array()).all() &&
+          (obstacle_surface_.triangle_max_m[t].array() >= far_lo.array()).all())) {
+      obstacle_triangle_enabled_[t] = 0;
+      continue;
+    }
     Eigen::Vector3d moved = Eigen::Vector3d::Zero();
     const auto& tri = triangles[t];
     for (int k = 0; k < 3; ++k) {
@@ -223,47 +238,80 @@ void TwoBodySession::BroadPhase(const Eigen::Vector3d& increment_m) {
       region_.push_back(slot);
     }
   }
-  // U = C f on the region only (algorithms.md §5): the last step's loaded slots.
-  std::sort(region_.begin(), region_.end());  // ascending slots: rows of C read in order
-  // Consecutive slots form runs: for each loaded slot j the blocks (i, j) of a run are one
-  // contiguous stream (BlockedCompliance).
-  const BlockedCompliance& compliance = obstacle_surface_.compliance_m_per_n;
-  region_runs_.clear();
-  for (std::size_t k = 0; k < region_.size(); ++k) {
-    if (k == 0 || region_[k] != region_[k - 1] + 1) {
-      region_runs_.push_back({region_[k], region_[k] + 1});
-    } else {
-      region_runs_.back().second = region_[k] + 1;
-    }
-  }
-  // C is symmetric and the loaded slots are region slots too, so a block C(i, j) between two
-  // loaded slots serves both U_i += C(i, j) f_j and U_j += C(i, j)ᵀ f_i: it is read once, in
-  // the column of the smaller slot (most of the region is loaded: ~40 % fewer block reads).
-  const std::vector<char>& loaded = obstacle_slot_loaded_;
-  for (int i : region_) obstacle_displacement_m_.segment<3>(3 * i).setZero();
-  for (int j : obstacle_loaded_) {
-    const Eigen::Vector3d f = Block(obstacle_slot_force_n_, j);
-    Eigen::Vector3d u_j = Eigen::Vector3d::Zero();
-    for (const auto& [begin, end] : region_runs_) {
-      for (int i = begin; i < end; ++i) {
-        if (!loaded[static_cast<std::size_t>(i)]) {
-          obstacle_displacement_m_.segment<3>(3 * i).noalias() += compliance.block(i, j) * f;
-        } else if (i > j) {
-          const auto block = compliance.block(i, j);
-          obstacle_displacement_m_.segment<3>(3 * i).noalias() += block * f;
-          u_j.noalias() += block.transpose() * Block(obstacle_slot_force_n_, i);
-        } else if (i == j) {
-          u_j.noalias() += compliance.block(j, j) * f;
-        }
-      }
-    }
-    obstacle_displacement_m_.segment<3>(3 * j) += u_j;
-  }
+  // U = C f on the region only (algorithms.md §5), from the last step's loaded slots.
+  ObstacleDisplacementOnRegion();
   for (int i : region_) {
     const int node = obstacle_nodes[static_cast<std::size_t>(i)];
     obstacle_positions_m_.row(node) = obstacle_reference.row(node) + Block(obstacle_displacement_m_, i).transpose();
   }
   output_.region_nodes = static_cast<int>(region_.size());
+}
+
+// Runs [begin, end) of consecutive entries of an ascending slot list.
+void TwoBodySession::SlotRuns(const std::vector<int>& slots, std::vector<std::pair<int, int>>* runs) {
+  runs->clear();
+  for (std::size_t k = 0; k < slots.size(); ++k) {
+    if (k == 0 || slots[k] != slots[k - 1] + 1) {
+      runs->push_back({slots[k], slots[k] + 1});
+    } else {
+      runs->back().second = slots[k] + 1;
+    }
+  }
+}
+
+void TwoBodySession::ObstacleDisplacementOnRegion() {
+  // U_i = Σ_j C(i, j) f_j for the region slots i, over the loaded slots j. The cost is the
+  // ~10^4 block reads (load-bound, docs/free-interaction.md), so: blocks of one column j are
+  // read in runs of consecutive slots (one stream each, BlockedCompliance), f_j stays in
+  // registers, no branch in the inner loops, and C = Cᵀ serves a block between two loaded
+  // slots for both of them (read once, in the column of the smaller slot).
+  const BlockedCompliance& compliance = obstacle_surface_.compliance_m_per_n;
+  std::sort(obstacle_loaded_.begin(), obstacle_loaded_.end());
+  region_free_.clear();
+  for (int slot : region_) {
+    if (!obstacle_slot_loaded_[static_cast<std::size_t>(slot)]) region_free_.push_back(slot);
+  }
+  std::sort(region_free_.begin(), region_free_.end());
+  SlotRuns(region_free_, &region_runs_);
+  SlotRuns(obstacle_loaded_, &loaded_runs_);
+  double* u = obstacle_displacement_m_.data();
+  const double* f = obstacle_slot_force_n_.data();
+  for (int i : region_) obstacle_displacement_m_.segment<3>(3 * i).setZero();
+  for (int j : obstacle_loaded_) {
+    const double* column = compliance.column_data(j);
+    const double f0 = f[3 * j], f1 = f[3 * j + 1], f2 = f[3 * j + 2];
+    // Region slots without load: U_i += C(i, j) f_j (column-major block: column r at 3r).
+    for (const auto& [begin, end] : region_runs_) {
+      const double* b = column + 9 * static_cast<std::size_t>(begin);
+      for (int i = begin; i < end; ++i, b += 9) {
+        double* ui = u + 3 * i;
+        ui[0] += b[0] * f0 + b[3] * f1 + b[6] * f2;
+        ui[1] += b[1] * f0 + b[4] * f1 + b[7] * f2;
+        ui[2] += b[2] * f0 + b[5] * f1 + b[8] * f2;
+      }
+    }
+    // Loaded slots i >= j: U_i += C(i, j) f_j and, for i > j, U_j += C(i, j)ᵀ f_i.
+    double uj0 = 0.0, uj1 = 0.0, uj2 = 0.0;
+    for (const auto& [run_begin, end] : loaded_runs_) {
+      if (end <= j) continue;
+      const int begin = std::max(run_begin, j + 1);
+      const double* b = column + 9 * static_cast<std::size_t>(begin);
+      for (int i = begin; i < end; ++i, b += 9) {
+        double* ui = u + 3 * i;
+        const double* fi = f + 3 * i;
+        ui[0] += b[0] * f0 + b[3] * f1 + b[6] * f2;
+        ui[1] += b[1] * f0 + b[4] * f1 + b[7] * f2;
+        ui[2] += b[2] * f0 + b[5] * f1 + b[8] * f2;
+        uj0 += b[0] * fi[0] + b[1] * fi[1] + b[2] * fi[2];
+        uj1 += b[3] * fi[0] + b[4] * fi[1] + b[5] * fi[2];
+        uj2 += b[6] * fi[0] + b[7] * fi[1] + b[8] * fi[2];
+      }
+    }
+    const double* d = column + 9 * static_cast<std::size_t>(j);
+    u[3 * j] += uj0 + d[0] * f0 + d[3] * f1 + d[6] * f2;
+    u[3 * j + 1] += uj1 + d[1] * f0 + d[4] * f1 + d[7] * f2;
+    u[3 * j + 2] += uj2 + d[2] * f0 + d[5] * f1 + d[8] * f2;
+  }
 }
 
 void TwoBodySession::CompleteContactDisplacements() {

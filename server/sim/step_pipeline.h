@@ -139,6 +139,9 @@ class TwoBodySession {
 
  private:
   void BroadPhase(const Eigen::Vector3d& increment_m);
+  // U = C f of the last forces on the region slots (kPrecomputed).
+  void ObstacleDisplacementOnRegion();
+  static void SlotRuns(const std::vector<int>& slots, std::vector<std::pair<int, int>>* runs);
   void DetectContacts(const Eigen::Vector3d& device_translation_m);
   void CompleteContactDisplacements();
   // W and ũ; pair_blocks(a, b) gives Σ_pq c_ap c_bq C(p, q) over both bodies (world, m/N).
@@ -173,7 +176,8 @@ class TwoBodySession {
   Eigen::Matrix<double, Eigen::Dynamic, 3> tool_positions_m_;
   // Broad phase: region slots of the obstacle surface, per-slot flag, enabled faces/edge nodes.
   std::vector<int> region_;
-  std::vector<std::pair<int, int>> region_runs_;  // [begin, end) slot runs of region_
+  std::vector<int> region_free_;  // region slots that carry no load
+  std::vector<std::pair<int, int>> region_runs_, loaded_runs_;  // [begin, end) runs of region_free_, obstacle_loaded_
   std::vector<char> in_region_, obstacle_triangle_enabled_, edge_node_enabled_;
   Eigen::VectorXd cell_moved_m_;  // per cell and axis: bound on the last displacement, m
   // Pass 1: tool nodes vs obstacle faces; pass 2: obstacle edge nodes vs tool faces.
