@@ -2,6 +2,8 @@
 
 #include "fclib/fclib_c.h"
 #include <hdf5.h>
+#include <sys/prctl.h>
+#include <sys/socket.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -11,6 +13,7 @@
 #include <cmath>
 #include <csignal>
 #include <cstdio>
+#include <cstdint>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
@@ -404,37 +407,127 @@ void CheckIsHdf5File(const std::string& path) {
 // in a child process: if HDF5 kills it, the file is refused with an InputError; otherwise
 // they run again here with the same (deterministic) outcome. Not for multi-threaded use of
 // HDF5 (neither is the serial HDF5 library).
-constexpr int kProbeRefused = 3;  // the child's exit code when the checks threw InputError
+//
+// The child is a worker that stays (ProbeWorker): forking a large process copies its page
+// tables, and per file that was most of the fuzzer's time (docs/fuzzing.md). A worker that
+// crashed is replaced at the next file; one that has probed kProbesPerWorker files too, so
+// library state left by earlier corrupt files cannot build up. Its verdict only decides
+// whether the file is safe to parse here; the checks that count are the ones run here after.
+constexpr int kProbeRefused = 3;  // the worker's verdict when the checks threw InputError
+constexpr int kProbesPerWorker = 1000;
 
-template <typename Checks>
-void ProbeInChildProcess(const std::string& path, const Checks& checks) {
-  std::fflush(nullptr);
-  const pid_t child = fork();
-  if (child < 0) return;  // no process to spare: the checks run in-process only
-  if (child == 0) {
-    // A crash must end the child by its signal, not in a sanitizer's or fuzzer's handler.
-    for (const int signal_number : {SIGSEGV, SIGBUS, SIGFPE, SIGILL}) std::signal(signal_number, SIG_DFL);
-    int code = 0;
-    try {
-      checks();
-    } catch (const InputError&) {
-      code = kProbeRefused;
-    } catch (const std::bad_alloc&) {
-      code = kProbeRefused;
+void CheckEverythingInProcess(const std::string& path);
+
+class ProbeWorker {
+ public:
+  ~ProbeWorker() { Stop(); }
+
+  // Runs CheckEverythingInProcess(path) in the worker. Throws InputError when HDF5 crashed
+  // the worker on this file; returns quietly when the checks passed or refused the file (the
+  // caller's own run gives the message) or when no process can be started (then the checks
+  // run in-process only).
+  void Probe(const std::string& path) {
+    if (socket_ < 0 && !Start()) return;
+    const std::uint32_t length = static_cast<std::uint32_t>(path.size());
+    char verdict = 0;
+    if (!SendAll(&length, sizeof(length)) || !SendAll(path.data(), path.size()) || !ReceiveVerdict(&verdict)) {
+      // The worker ended during this file: by a signal if HDF5 crashed on it.
+      const int status = Stop();
+      if (WIFSIGNALED(status)) {
+        Fail(path, std::string("HDF5 crashed reading the file (") + strsignal(WTERMSIG(status)) + "): it is corrupt");
+      }
+      HAPCO_ASSERT(false, "the FCLIB pre-check process failed for another reason than the file");
     }
-    std::_Exit(code);
+    HAPCO_ASSERT(verdict == 0 || verdict == kProbeRefused, "the FCLIB pre-check process sent an unknown verdict");
+    if (++probes_ >= kProbesPerWorker) Stop();
   }
-  int status = 0;
-  while (waitpid(child, &status, 0) < 0) {
-    if (errno != EINTR) return;
+
+ private:
+  bool Start() {
+    int ends[2] = {-1, -1};
+    if (socketpair(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0, ends) != 0) return false;
+    std::fflush(nullptr);
+    const pid_t child = fork();
+    if (child < 0) {
+      close(ends[0]);
+      close(ends[1]);
+      return false;
+    }
+    if (child == 0) {
+      close(ends[0]);
+      Serve(ends[1]);
+    }
+    close(ends[1]);
+    pid_ = child;
+    socket_ = ends[0];
+    probes_ = 0;
+    return true;
   }
-  if (WIFSIGNALED(status)) {
-    Fail(path, std::string("HDF5 crashed reading the file (") + strsignal(WTERMSIG(status)) +
-                   "): it is corrupt");
+
+  // The worker: one path in, one verdict byte out, until the parent closes its end.
+  [[noreturn]] static void Serve(int socket) {
+    prctl(PR_SET_PDEATHSIG, SIGKILL);
+    // A crash must end the worker by its signal, not in a sanitizer's or fuzzer's handler.
+    for (const int signal_number : {SIGSEGV, SIGBUS, SIGFPE, SIGILL}) std::signal(signal_number, SIG_DFL);
+    std::string path;
+    for (;;) {
+      std::uint32_t length = 0;
+      if (!ReceiveAll(socket, &length, sizeof(length))) std::_Exit(0);
+      path.resize(length);
+      if (!ReceiveAll(socket, path.data(), length)) std::_Exit(0);
+      char verdict = 0;
+      try {
+        CheckEverythingInProcess(path);
+      } catch (const InputError&) {
+        verdict = kProbeRefused;
+      } catch (const std::bad_alloc&) {
+        verdict = kProbeRefused;
+      }
+      if (send(socket, &verdict, 1, MSG_NOSIGNAL) != 1) std::_Exit(0);
+    }
   }
-  HAPCO_ASSERT(WIFEXITED(status) && (WEXITSTATUS(status) == 0 || WEXITSTATUS(status) == kProbeRefused),
-               "the FCLIB pre-check process failed for another reason than the file");
-}
+
+  static bool ReceiveAll(int socket, void* data, std::size_t size) {
+    auto* bytes = static_cast<char*>(data);
+    while (size > 0) {
+      const ssize_t got = recv(socket, bytes, size, 0);
+      if (got < 0 && errno == EINTR) continue;
+      if (got <= 0) return false;
+      bytes += got;
+      size -= static_cast<std::size_t>(got);
+    }
+    return true;
+  }
+  bool ReceiveVerdict(char* verdict) const { return ReceiveAll(socket_, verdict, 1); }
+  bool SendAll(const void* data, std::size_t size) const {
+    const auto* bytes = static_cast<const char*>(data);
+    while (size > 0) {
+      const ssize_t sent = send(socket_, bytes, size, MSG_NOSIGNAL);  // no SIGPIPE if it died
+      if (sent < 0 && errno == EINTR) continue;
+      if (sent <= 0) return false;
+      bytes += sent;
+      size -= static_cast<std::size_t>(sent);
+    }
+    return true;
+  }
+
+  // Closes the worker's socket (it exits) and reaps it; returns its wait status.
+  int Stop() {
+    if (socket_ >= 0) close(socket_);
+    socket_ = -1;
+    int status = 0;
+    if (pid_ > 0) {
+      while (waitpid(pid_, &status, 0) < 0 && errno == EINTR) {
+      }
+    }
+    pid_ = -1;
+    return status;
+  }
+
+  pid_t pid_ = -1;
+  int socket_ = -1;
+  int probes_ = 0;
+};
 
 LocalLayout CheckFileInProcess(const std::string& path, bool* has_solution, bool* has_global);
 void ProbeFileOnce(const std::string& path);
@@ -687,7 +780,8 @@ void ProbeFileOnce(const std::string& path) {
     if (last_probed && *last_probed == *identity) return;
   }
   last_probed.reset();
-  ProbeInChildProcess(path, [&] { CheckEverythingInProcess(path); });
+  static ProbeWorker worker;
+  worker.Probe(path);
   last_probed = identity;
 }
 
