@@ -41,10 +41,10 @@ constexpr const char* kFooter =
 Exit code: 0 when it ran (also if it measured misses), 1 bad input, 2 no server found (no client connected), 3 DDS failure.)";
 
 struct Options {
-  std::string scene_path, mode = "kinematic", prefix = "lt", csv_dir, security_dir;
+  std::string scene_path, mode = "kinematic", prefix = "lt", csv_dir, security_dir, render = "direct";
   int clients = 0, domain = 0, rt_priority = 0;
-  double duration_s = 0, stagger_ms = 100, timeout_ms = 50, connect_timeout_s = 30;
-  bool loop = false, plots = false, quiet = false;
+  double duration_s = 0, stagger_ms = 100, timeout_ms = 50, connect_timeout_s = 30, max_model_stiffness_n_per_m = 3000;
+  bool loop = false, plots = false, quiet = false, passivity = false;
 };
 
 // "out", "out/" and "./out" are the same directory.
@@ -78,6 +78,7 @@ bool Parse(int argc, char** argv, Options* o) {
                     "device (hapco-phantom --help)",
                     "Device");
   command.AddForceTimeout(&o->timeout_ms);
+  command.AddRendering(&o->render, &o->passivity, &o->max_model_stiffness_n_per_m);
   command.AddDomain(&o->domain);
   command.AddSecurity(&o->security_dir,
                       "DIR/loadtest-<prefix>, one identity for every client and the status view (scripts/dds-security "
@@ -206,6 +207,8 @@ struct Row {
   double rt_p50 = 0, rt_p99 = 0, rt_p999 = 0, rt_max = 0, render_p50 = 0, render_p99 = 0;
   hapco::loadtest::StabilityMetrics stability;
   double passivity_min_j = 0, passivity_final_j = 0, passivity_max_drop_j = 0;
+  double dissipated_j = 0;     // by the client's passivity controller (--passivity), J
+  uint64_t model_ticks = 0;    // ticks rendered from a local model (--render local-model)
   double tracking_sum = 0, d2r_sum = 0, d2s_sum = 0;  // for pooling
 };
 
@@ -295,13 +298,14 @@ constexpr const char* kSummaryHeader =
     "rt_p999_us,rt_max_us,render_p50_us,render_p99_us,tracking_rms_n,server_rms_n,d2_rendered_ms_n2,"
     "d2_server_ms_n2,hf_ratio,passivity_min_j,passivity_final_j,passivity_max_drop_j,passivity_violated,"
     "server_step_p50_us,server_step_p99_us,server_step_max_us,server_cpu,server_status_periods,server_sessions_max,"
-    "server_superseded\n";
+    "server_superseded,render,passivity_controller,passivity_dissipated_j,model_ticks\n";
 
 void WriteSummaryRow(std::FILE* f, const Row& r, const Options& o, const ServerSummary& s, double tolerance_j) {
   const auto& st = r.stability;
   std::fprintf(f,
                "%s,%d,%s,%g,%g,%d,%llu,%llu,%llu,%llu,%.4f,%llu,%.4f,%llu,%llu,%llu,%llu,%llu,%llu,%llu,%llu,%.6f,%.6f,"
-               "%.1f,%.1f,%.1f,%.1f,%.1f,%.1f,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%d,%.1f,%.1f,%.1f,%.3f,%d,%u,%llu\n",
+               "%.1f,%.1f,%.1f,%.1f,%.1f,%.1f,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%d,%.1f,%.1f,%.1f,%.3f,%d,%u,%llu,"
+               "%s,%d,%.6g,%llu\n",
                r.client.c_str(), o.clients, o.mode.c_str(), o.duration_s, o.timeout_ms, r.ticks_run,
                static_cast<unsigned long long>(r.poses), static_cast<unsigned long long>(r.forces),
                static_cast<unsigned long long>(r.reordered), static_cast<unsigned long long>(r.missed), MissedPct(r),
@@ -314,7 +318,8 @@ void WriteSummaryRow(std::FILE* f, const Row& r, const Options& o, const ServerS
                r.render_p99, std::sqrt(st.tracking_ms_n2), std::sqrt(st.server_ms_n2), st.d2_rendered_ms_n2,
                st.d2_server_ms_n2, st.hf_ratio, r.passivity_min_j, r.passivity_final_j, r.passivity_max_drop_j,
                r.passivity_min_j < -tolerance_j ? 1 : 0, s.step_p50_us, s.step_p99_us, s.step_max_us, s.cpu_use,
-               s.periods, s.sessions_max, static_cast<unsigned long long>(s.superseded));
+               s.periods, s.sessions_max, static_cast<unsigned long long>(s.superseded), o.render.c_str(),
+               o.passivity ? 1 : 0, r.dissipated_j, static_cast<unsigned long long>(r.model_ticks));
 }
 
 void PrintRow(const Row& r) {
@@ -348,6 +353,9 @@ int Run(const Options& o) {
   base.safety.timeout_s = o.timeout_ms * 1e-3;
   base.connect_timeout_s = o.connect_timeout_s;
   base.drain_ticks = static_cast<int>(std::lround(o.timeout_ms));
+  phantom::ParseRenderMode(o.render, &base.render.mode);  // a choice: checked by the parser
+  base.render.passivity = o.passivity;
+  base.render.max_stiffness_n_per_m = o.max_model_stiffness_n_per_m;
   const double tick_s = base.safety.tick_s;
 
   if (!o.csv_dir.empty()) std::filesystem::create_directories(o.csv_dir);
@@ -503,6 +511,8 @@ int Run(const Options& o) {
     row.passivity_min_j = passivity.min_energy_j;
     row.passivity_final_j = passivity.final_energy_j;
     row.passivity_max_drop_j = passivity.max_drop_j;
+    row.dissipated_j = s.passivity_dissipated_j;
+    row.model_ticks = s.render.model_ticks;
     rows.push_back(row);
     if (!o.csv_dir.empty()) {
       WriteTicksCsv(o.csv_dir + "/ticks-" + r->id + ".csv", *r->recorder, passivity);
@@ -539,6 +549,8 @@ int Run(const Options& o) {
     all.passivity_min_j = std::min(all.passivity_min_j, row.passivity_min_j);
     all.passivity_final_j = rows.size() == 1 ? row.passivity_final_j : std::min(all.passivity_final_j, row.passivity_final_j);
     all.passivity_max_drop_j = std::max(all.passivity_max_drop_j, row.passivity_max_drop_j);
+    all.dissipated_j += row.dissipated_j;
+    all.model_ticks += row.model_ticks;
   }
   if (rt_csv != nullptr) std::fclose(rt_csv);
   {
@@ -558,8 +570,13 @@ int Run(const Options& o) {
   all.render_p50 = hapco::QuantileOf(all_render, 0.5);
   all.render_p99 = hapco::QuantileOf(all_render, 0.99);
 
-  std::printf("hapco-loadtest: %zu of %d clients ran %.1f s each (%s%s)%s\n", ran.size(), o.clients, o.duration_s,
-              o.mode.c_str(), o.loop ? ", trajectory looped" : "", g_stop.load() ? " - stopped by signal" : "");
+  std::printf("hapco-loadtest: %zu of %d clients ran %.1f s each (%s, render %s%s%s)%s\n", ran.size(), o.clients,
+              o.duration_s, o.mode.c_str(), o.render.c_str(), o.passivity ? " + passivity" : "",
+              o.loop ? ", trajectory looped" : "", g_stop.load() ? " - stopped by signal" : "");
+  if (o.render == "local-model" || o.passivity) {
+    std::printf("rendering: %llu ticks from a local model; passivity controller dissipated %.4f J\n",
+                static_cast<unsigned long long>(all.model_ticks), all.dissipated_j);
+  }
   for (const auto& row : rows) PrintRow(row);
   PrintRow(all);
   std::printf("server: step p50 %.0f us, p99 %.0f us (median over %d status periods), max %.0f us, CPU %.2f cores, "

@@ -20,7 +20,26 @@ SafetyFilter::SafetyFilter(const SafetyParameters& parameters) : parameters_(par
                "SafetyFilter: parameters must be > 0");
 }
 
+void SafetyFilter::Retarget(const Eigen::Vector3d& target_n) {
+  if (stale_ || !have_fresh_) return;
+  if (!target_n.allFinite()) {
+    ++rejected_non_finite_;
+    return;
+  }
+  target_n_ = target_n;
+  const double magnitude = target_n_.norm();
+  if (magnitude > parameters_.max_force_n) {
+    target_n_ *= parameters_.max_force_n / magnitude;
+    ++clamped_;
+  }
+}
+
 Eigen::Vector3d SafetyFilter::Update(bool fresh, const Eigen::Vector3d& raw_n, double now_s) {
+  return Update(fresh, raw_n, now_s, Eigen::Vector3d::Zero());
+}
+
+Eigen::Vector3d SafetyFilter::Update(bool fresh, const Eigen::Vector3d& raw_n, double now_s,
+                                     const Eigen::Vector3d& motion_n) {
   if (fresh && !raw_n.allFinite()) {
     ++rejected_non_finite_;
     fresh = false;  // a NaN is no news: keep the last good target
@@ -60,6 +79,7 @@ Eigen::Vector3d SafetyFilter::Update(bool fresh, const Eigen::Vector3d& raw_n, d
     return rendered_;
   }
   const double max_step = parameters_.max_change_per_tick_n;
+  if (motion_n.allFinite()) rendered_ += motion_n;  // the device's own motion: not limited
   const Eigen::Vector3d delta = target_n_ - rendered_;
   const double delta_norm = delta.norm();
   if (delta_norm > max_step) {
@@ -67,6 +87,8 @@ Eigen::Vector3d SafetyFilter::Update(bool fresh, const Eigen::Vector3d& raw_n, d
   } else {
     rendered_ = target_n_;
   }
+  const double magnitude = rendered_.norm();
+  if (magnitude > parameters_.max_force_n) rendered_ *= parameters_.max_force_n / magnitude;
   return rendered_;
 }
 

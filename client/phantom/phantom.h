@@ -40,6 +40,19 @@ class SafetyFilter {
   // render, N: finite, |F| <= max_force_n, |F - previous| <= max_change_per_tick_n (during a
   // timeout ramp: <= 250 N/s times the time since the previous tick).
   Eigen::Vector3d Update(bool fresh, const Eigen::Vector3d& raw_n, double now_s);
+  // The same, where motion_n of the change is explained by the device's own motion through
+  // a local contact model (force_renderer.h: F_model(x_now) - F_model(x_before), a spring of at
+  // most the renderer's stiffness cap): that part is not rate limited (a stiff wall must push
+  // back as fast as the hand moves into it), the rest is; the magnitude clamp holds for all.
+  // motion_n = 0 is Update above.
+  Eigen::Vector3d Update(bool fresh, const Eigen::Vector3d& raw_n, double now_s, const Eigen::Vector3d& motion_n);
+
+  // A new target between arrivals (a local model evaluated at the current position, or a
+  // passivity damper: force_renderer.h), taken by the next Update(false, ...): clamped like a
+  // fresh force, but it does not restart the timeout (only arrivals prove the server is
+  // there) and it is ignored during a timeout ramp and before the first force. A non-finite
+  // target is ignored and counted.
+  void Retarget(const Eigen::Vector3d& target_n);
 
   bool stale() const { return stale_; }            // currently in (or after) a timeout ramp
   uint64_t rejected_non_finite() const { return rejected_non_finite_; }

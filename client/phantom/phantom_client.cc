@@ -105,6 +105,14 @@ void PhantomClient::OnForcesAvailable() {
     r.sliding = force.sliding_count;
     r.verdict = FromIdl(force.pose_verdict);
     r.server_ignored_poses = force.ignored_poses;
+    const hapco_idl_LocalContactModel& m = force.model;
+    r.model.valid = m.valid;
+    r.model.position_m = Eigen::Vector3d(m.position_m.x, m.position_m.y, m.position_m.z);
+    for (int i = 0; i < 3; ++i) {
+      for (int j = 0; j < 3; ++j) r.model.stiffness_n_per_m(i, j) = m.stiffness_n_per_m[3 * i + j];
+    }
+    r.model.normal = Eigen::Vector3d(m.normal.x, m.normal.y, m.normal.z);
+    r.model.friction_coefficient = m.friction_coefficient;
     arrivals_head_.store(head + 1, std::memory_order_release);
   }
 }
@@ -170,6 +178,7 @@ void PhantomClient::Run(const std::atomic<bool>& stop, const std::function<void(
   const auto& trajectory = config_.trajectory;
   const int trajectory_ticks = static_cast<int>(trajectory.size()) - 1;
   SafetyFilter safety(config_.safety);
+  ForceRenderer renderer(config_.render);
   HandModel hand(config_.hand, trajectory[0]);
 
   hapco_idl_DevicePose pose{};
@@ -239,6 +248,7 @@ void PhantomClient::Run(const std::atomic<bool>& stop, const std::function<void(
     taken.clear();
     bool fresh = false;
     Eigen::Vector3d raw = Eigen::Vector3d::Constant(std::nan(""));
+    ReceivedModel model;
     for (uint32_t tail = arrivals_tail_.load(std::memory_order_relaxed);
          tail != arrivals_head_.load(std::memory_order_acquire); ++tail) {
       const ReceivedForce r = arrivals_[tail % kArrivalCapacity];
@@ -268,13 +278,22 @@ void PhantomClient::Run(const std::atomic<bool>& stop, const std::function<void(
       fresh = true;
       last_force_sequence = r.pose_sequence;
       raw = r.force_n;
+      model = r.model;
       stats_.round_trip_us.push_back(r.round_trip_us());
       stats_.render_latency_us.push_back(static_cast<double>(now - r.client_time_ns) * 1e-3);
       stats_.server_time_us.push_back(static_cast<double>(r.server_time_ns) * 1e-3);
       pose.reported_round_trip_ns = r.arrival_ns - r.client_time_ns;
       taken.push_back(r);
     }
-    rendered = safety.Update(fresh, raw, now_s);
+    // Direct mode renders arrivals as they come (the safety filter holds them between
+    // arrivals); local-model and passivity change the command every tick.
+    const Eigen::Vector3d command = renderer.Command(fresh, raw, model, position, velocity, tick_s);
+    if (renderer.changes_between_arrivals() && (!fresh || raw.allFinite())) {
+      if (!fresh) safety.Retarget(command);
+      rendered = safety.Update(fresh, command, now_s, renderer.motion_change_n());
+    } else {
+      rendered = safety.Update(fresh, raw, now_s);  // direct, or a non-finite arrival (rejected, counted)
+    }
     stats_.peak_rendered_n = std::max(stats_.peak_rendered_n, rendered.norm());
     const bool stale = safety.stale();
     if (stale && !was_stale) {
@@ -305,11 +324,15 @@ void PhantomClient::Run(const std::atomic<bool>& stop, const std::function<void(
       record.position_m = position;
       record.velocity_m_per_s = velocity;
       record.forces = taken;
+      record.commanded_force_n = command;
       record.rendered_force_n = rendered;
       record.stale = stale;
       on_tick(record);
     }
   }
+  stats_.render = renderer.stats();
+  stats_.passivity_dissipated_j = renderer.passivity().dissipated_j();
+  stats_.passivity_active_ticks = renderer.passivity().active_ticks();
   stats_.stale_ticks = safety.stale_ticks();
   stats_.rejected_non_finite = safety.rejected_non_finite();
   stats_.clamped = safety.clamped();

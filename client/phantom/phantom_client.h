@@ -21,6 +21,7 @@
 #include <string>
 #include <vector>
 
+#include "force_renderer.h"
 #include "phantom.h"
 #include "service/security.h"
 
@@ -39,6 +40,7 @@ struct ClientConfig {
   int ticks = 0;                                  // poses to publish (> 0)
   std::string scene_name;                         // sent with SESSION_JOIN
   SafetyParameters safety;                        // timeout, ramp, limits; tick_s is the servo period
+  RendererParameters render;                      // direct / local-model, passivity (force_renderer.h)
   HandParameters hand;
   double connect_timeout_s = 30.0;
   service::SecurityIdentity security;             // enabled: secured (DIR/<client_id>)
@@ -63,6 +65,7 @@ struct ReceivedForce {
   // the last force sent): not a new force, never rendered as one.
   ServerVerdict verdict = ServerVerdict::kStepped;
   uint64_t server_ignored_poses = 0;  // the server's count of this session's ignored poses
+  ReceivedModel model;                // FeedbackForce.model (valid with a stepped force in contact)
   double round_trip_us() const { return static_cast<double>(arrival_ns - client_time_ns) * 1e-3; }
 };
 
@@ -77,6 +80,7 @@ struct TickRecord {
   Eigen::Vector3d position_m = Eigen::Vector3d::Zero();        // device position (as published)
   Eigen::Vector3d velocity_m_per_s = Eigen::Vector3d::Zero();  // device velocity
   std::span<const ReceivedForce> forces;  // taken this tick, oldest first; the last is rendered
+  Eigen::Vector3d commanded_force_n = Eigen::Vector3d::Zero(); // the renderer's, before the safety filter
   Eigen::Vector3d rendered_force_n = Eigen::Vector3d::Zero();  // after the safety filter
   bool stale = false;              // the safety filter is in (or after) a timeout ramp
 };
@@ -94,6 +98,9 @@ struct ClientStats {
   uint64_t ignored_notices = 0;     // notices "the server ignored pose N" received
   uint64_t server_ignored_poses = 0;  // the server's count in the newest sample
   double peak_rendered_n = 0;
+  RendererStats render;                 // the force renderer's counts (force_renderer.h)
+  double passivity_dissipated_j = 0;    // energy the passivity controller took out, J
+  int64_t passivity_active_ticks = 0;   // ticks it damped
   int64_t first_force_arrival_ns = -1;  // CLOCK_MONOTONIC when the first force arrived (-1: none)
   std::vector<double> round_trip_us;       // pose sampled -> force arrived
   std::vector<double> render_latency_us;   // pose sampled -> the tick that renders it

@@ -254,6 +254,22 @@ CLI::Option* CommandLine::AddForceTimeout(double* milliseconds) {
                    "Device", 0, HUGE_VAL, true);
 }
 
+void CommandLine::AddRendering(std::string* mode, bool* passivity, double* max_model_stiffness_n_per_m) {
+  AddChoice("--render", mode, {"direct", "local-model"},
+            "direct (default): the newest force, held until the next; local-model: the contact model "
+            "sent with the newest force (stiffness, normal, friction) evaluated at the device's current "
+            "position every tick, for delayed networks (docs/network-haptics.md)",
+            "Device");
+  AddFlag("--passivity", passivity,
+          "time-domain passivity controller: a damper exactly when the energy the device received goes "
+          "negative (the energy it dissipated is reported)",
+          "Device");
+  AddNumber("--max-model-stiffness-n-per-m", max_model_stiffness_n_per_m, "K",
+            "local-model: the model's stiffness is scaled down to at most K N/m (default 3000, what the "
+            "device renders stably)",
+            "Device", 0, HUGE_VAL, true);
+}
+
 CLI::Option* CommandLine::AddDuration(double* seconds, const std::string& help) {
   return AddNumber("--duration-s", seconds, "S", help, "Run", 0, HUGE_VAL, true);
 }

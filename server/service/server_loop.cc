@@ -140,7 +140,7 @@ ServerLoop::Client* ServerLoop::OpenSession(const std::string& client_id, const 
   try {
     Client client;
     client.session = std::make_unique<Session>(client_id, model, participant_, force_topic_, contact_topic_,
-                                               options_.time_budget_s, options_.physics);
+                                               options_.time_budget_s, options_.physics, options_.local_model);
     auto [it, inserted] = sessions_.emplace(client_id, std::move(client));
     HAPCO_ASSERT(inserted, "OpenSession: session exists already");
     ++counters_.sessions_opened;

@@ -30,6 +30,9 @@ struct ServerOptions {
   int max_sessions = 16;         // clients beyond this are refused (counted as unknown)
   int threads = 1;               // threads stepping sessions, the server thread included (>= 1)
   SessionPhysics physics = SessionPhysics::kContact;  // kNone: the load tests' zero-cost floor
+  // Send the contact's local model with every force (FeedbackForce.model, sim/local_model.h):
+  // ~5 % of a step (docs/network-haptics.md); clients rendering in local-model mode need it.
+  bool local_model = true;
   PoseLimits limits;
   // Solver wall-clock budget per step, s (0 = none); < 0 keeps the scene's. A step that
   // runs out returns SOLVER_TIME_BUDGET_EXCEEDED with the forces it has.

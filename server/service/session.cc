@@ -29,9 +29,10 @@ Session::Session(std::string client_id, const sim::TwoBodyModel& model,
                  const Participant& participant,
                  const Topic<hapco_idl_FeedbackForce>& force_topic,
                  const Topic<hapco_idl_ContactStateFrame>& contact_topic, double time_budget_s,
-                 SessionPhysics physics)
+                 SessionPhysics physics, bool local_model)
     : client_id_(std::move(client_id)),
       physics_(physics),
+      local_model_(local_model),
       sim_(model),
       publisher_(participant, ClientPartition(client_id_)),
       force_topic_(&force_topic),
@@ -66,7 +67,8 @@ int64_t Session::StepAndPublish(const hapco_idl_DevicePose& pose, int64_t receiv
   const sim::StepOutput& out = physics_ == SessionPhysics::kContact ? sim_.Step(p) : kNoPhysics;
   ++counters_.steps;
   Eigen::Vector3d force_n = out.device_force_n;
-  if (!force_n.allFinite()) {
+  const bool force_finite = force_n.allFinite();
+  if (!force_finite) {
     // Never send a NaN: the last good force, counted. (The next steps may recover: the
     // session keeps its state; a persistent failure shows in the counter.)
     ++counters_.non_finite_forces;
@@ -85,6 +87,7 @@ int64_t Session::StepAndPublish(const hapco_idl_DevicePose& pose, int64_t receiv
   force_.sliding_count = static_cast<uint32_t>(out.state_counts[2]);
   force_.pose_verdict = hapco_idl_POSE_STEPPED;
   force_.ignored_poses = counters_.ignored_poses;
+  FillLocalModel(force_finite);
   force_.server_send_ns = MonotonicNowNs();
   if (force_writer_->Write(force_) != DDS_RETCODE_OK) ++counters_.force_write_errors;
   // The contact frame goes after the force: the force is the latency-critical sample.
@@ -126,6 +129,7 @@ void Session::NotifyIgnored(const hapco_idl_DevicePose& pose, int64_t receive_ns
   notice.client_time_ns = pose.client_time_ns;
   notice.server_receive_ns = receive_ns;
   notice.pose_verdict = idl_verdict;
+  notice.model.valid = false;  // a notice is no new force, and carries no model
   notice.ignored_poses = counters_.ignored_poses;
   notice.server_send_ns = MonotonicNowNs();
   if (!open()) return;
@@ -134,6 +138,28 @@ void Session::NotifyIgnored(const hapco_idl_DevicePose& pose, int64_t receive_ns
   } else {
     ++counters_.force_write_errors;
   }
+}
+
+void Session::FillLocalModel(bool force_is_from_this_step) {
+  hapco_idl_LocalContactModel& m = force_.model;
+  m = hapco_idl_LocalContactModel{};
+  if (!local_model_ || physics_ != SessionPhysics::kContact || !force_is_from_this_step) return;
+  // The pose answered, also without a model: a client keeps its model when that pose is
+  // outside the model's surface (client/phantom/force_renderer.h).
+  m.position_m = ToIdl(sim_.last_output().device_translation_m);
+  const sim::LocalContactModel& local = local_model_builder_.Linearize(sim_);
+  // A model needs a contact pushing (its normal) and finite numbers; otherwise none is sent
+  // and a client renders the force as it came.
+  if (local.normal_device.isZero() || !local.stiffness_n_per_m.allFinite() || !local.device_force_n.allFinite()) {
+    return;
+  }
+  m.valid = true;
+  m.position_m = ToIdl(local.device_translation_m);
+  for (int i = 0; i < 3; ++i) {
+    for (int j = 0; j < 3; ++j) m.stiffness_n_per_m[3 * i + j] = local.stiffness_n_per_m(i, j);
+  }
+  m.normal = ToIdl(local.normal_device);
+  m.friction_coefficient = local.friction_coefficient;
 }
 
 void Session::FillContactFrame(uint64_t pose_sequence) {

@@ -12,6 +12,7 @@
 
 #include "hapco_types.h"
 #include "service/dds.h"
+#include "sim/local_model.h"
 #include "sim/step_pipeline.h"
 #include "sim/pose_limits.h"
 #include "service/pose_intake.h"
@@ -50,7 +51,7 @@ class Session {
   Session(std::string client_id, const sim::TwoBodyModel& model, const Participant& participant,
           const Topic<hapco_idl_FeedbackForce>& force_topic,
           const Topic<hapco_idl_ContactStateFrame>& contact_topic, double time_budget_s = -1.0,
-          SessionPhysics physics = SessionPhysics::kContact);
+          SessionPhysics physics = SessionPhysics::kContact, bool local_model = true);
 
   const std::string& client_id() const { return client_id_; }
 
@@ -91,10 +92,14 @@ class Session {
 
  private:
   void FillContactFrame(uint64_t pose_sequence);
+  // FeedbackForce.model from the step just made (invalid without contact force).
+  void FillLocalModel(bool force_is_from_this_step);
 
   std::string client_id_;
   SessionPhysics physics_;
+  bool local_model_;
   sim::TwoBodySession sim_;
+  sim::LocalModelBuilder local_model_builder_;
   Publisher publisher_;
   const Topic<hapco_idl_FeedbackForce>* force_topic_;
   Writer<hapco_idl_ContactStateFrame> contact_writer_;

@@ -24,6 +24,8 @@
 // further press: it is not yet good enough there (issue 12).
 #include <Eigen/Dense>
 
+#include <vector>
+
 #include "sim/step_pipeline.h"
 
 namespace hapco::sim {
@@ -34,6 +36,14 @@ struct LocalContactModel {
   // dF/dd for the step's active set, N/m (world axes). Symmetric negative semi-definite
   // without sliding contacts (a spring pushing back); sliding makes it non-symmetric.
   Eigen::Matrix3d stiffness_n_per_m = Eigen::Matrix3d::Zero();
+  // What a client needs to keep separation and friction right away from d_k (the linear
+  // model knows neither): the unit direction of the resultant normal force on the device
+  // (Σ_α r_α,n n_α times the gain, normalised; zero without contact force) and the scene's
+  // Coulomb coefficient. A rendered force must not pull along -normal_device (contacts only
+  // push) and its part across normal_device stays within friction_coefficient times its part
+  // along it (the resultant of forces in their cones lies in that cone when the normals agree).
+  Eigen::Vector3d normal_device = Eigen::Vector3d::Zero();
+  double friction_coefficient = 0.0;
   int sticking = 0, sliding = 0;  // contacts in the active set
 
   // F(d) ≈ F(d_k) + K (d - d_k), N.
@@ -43,6 +53,26 @@ struct LocalContactModel {
 };
 
 // The local model of the session's last step (zero stiffness without active contacts).
+// Reuses its buffers: allocation-free once it has seen the largest active set (for the
+// server's 1 kHz path). Cost: the active set's n x n LU (n <= 3 x contacts): docs/network-haptics.md.
+class LocalModelBuilder {
+ public:
+  const LocalContactModel& Linearize(const TwoBodySession& session);
+  const LocalContactModel& model() const { return model_; }
+
+ private:
+  struct Unknown {
+    int contact = 0;
+    Eigen::Vector3d direction = Eigen::Vector3d::Zero();  // r_α = z * direction (local frame)
+  };
+  LocalContactModel model_;
+  std::vector<Unknown> unknowns_;
+  std::vector<int> rows_;  // rows of u = W r + q held at zero
+  Eigen::MatrixXd g_, w_basis_, system_, rhs_, dz_, dr_;
+  Eigen::PartialPivLU<Eigen::MatrixXd> lu_;
+};
+
+// One-off form of LocalModelBuilder::Linearize (tests, offline tools).
 LocalContactModel LinearizeLastStep(const TwoBodySession& session);
 
 }  // namespace hapco::sim

@@ -95,6 +95,11 @@ bool Parse(int argc, char** argv, Options* options) {
                     "contact (default), or none: the zero-cost floor for load tests (same DDS path, sessions and "
                     "samples, no contact computation, zero force)",
                     "Sessions");
+  bool no_local_model = false;
+  command.AddFlag("--no-local-model", &no_local_model,
+                  "do not send the contact's local model (stiffness, normal, friction) with the forces: saves "
+                  "~5 % of a step; clients then render forces as they come (hapco-phantom --render)",
+                  "Sessions");
   command.AddMaxJump(&options->server.limits.max_jump_m,
                      "largest plausible position change per pose, m (default 0.002); a larger jump is ignored "
                      "(the client keeps its last force and is told)");
@@ -123,6 +128,7 @@ bool Parse(int argc, char** argv, Options* options) {
   options->server.physics =
       physics == "none" ? hapco::service::SessionPhysics::kNone : hapco::service::SessionPhysics::kContact;
   if (time_budget_ms >= 0) options->server.time_budget_s = time_budget_ms * 1e-3;
+  options->server.local_model = !no_local_model;
   options->server.log = !quiet;
   options->server.security = {security_dir, "server"};  // disabled when security_dir is empty
   return true;

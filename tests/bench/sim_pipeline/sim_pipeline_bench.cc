@@ -30,6 +30,7 @@
 #include "common/timer.h"
 #include "io/scene_file.h"
 #include "sim/device_path.h"
+#include "sim/local_model.h"
 #include "sim/step_pipeline.h"
 
 namespace {
@@ -121,7 +122,7 @@ double EvictCaches(std::vector<double>* data) {
 }
 
 void PrintRow(const char* name, const std::vector<double>& v) {
-  std::printf("  %-9s median %9.1f us   p99 %9.1f us   max %9.1f us\n", name, 1e6 * Percentile(v, 0.5),
+  std::printf("  %-11s median %9.1f us   p99 %9.1f us   max %9.1f us\n", name, 1e6 * Percentile(v, 0.5),
               1e6 * Percentile(v, 0.99), 1e6 * Percentile(v, 1.0));
 }
 
@@ -197,8 +198,12 @@ int Run(const Options& options) {
   if (csv != nullptr) {
     std::fprintf(csv, "step,contacts,edge_contacts,region_nodes,outer_iterations,detect_s,assemble_s,solve_s,update_s,step_s,force_n,allocations\n");
   }
+  // The local contact model the server sends with each force (issue 12): timed after each
+  // step, apart from it, with its allocations.
+  std::vector<double> local_model_s, local_model_alloc, local_model_unknowns;
   for (int repeat = 0; repeat < options.repeats; ++repeat) {
     sim::TwoBodySession session(model, sim::SolveMode::kPrecomputed);
+    sim::LocalModelBuilder local_model;
     for (int step = 1; step <= steps; ++step) {
       const Eigen::Vector3d& d = path[static_cast<std::size_t>(step)];
       if (!cold.empty()) cold_sum += EvictCaches(&cold);
@@ -208,6 +213,14 @@ int Run(const Options& options) {
       all.Add(out);
       alloc_per_step.push_back(static_cast<double>(allocations));
       outer_iterations += out.iterations;
+      {
+        const long model_before = g_allocations.load();
+        Stopwatch model_watch;
+        const sim::LocalContactModel& m = local_model.Linearize(session);
+        local_model_s.push_back(model_watch.ElapsedSeconds());
+        local_model_alloc.push_back(static_cast<double>(g_allocations.load() - model_before));
+        local_model_unknowns.push_back(3 * m.sticking + m.sliding);
+      }
       region_nodes.push_back(out.region_nodes);
       contacts.push_back(out.num_contacts);
       if (csv != nullptr && repeat == options.repeats - 1) {
@@ -230,6 +243,11 @@ int Run(const Options& options) {
   PrintRow("assemble", all.assemble);
   PrintRow("solve", all.solve);
   PrintRow("update", all.update);
+  PrintRow("local model", local_model_s);
+  std::printf("  local model (not in the step above): unknowns median %.0f, max %.0f (3 per sticking, 1 per sliding "
+              "contact); heap allocations median %.0f, max %.0f\n",
+              Percentile(local_model_unknowns, 0.5), Percentile(local_model_unknowns, 1.0),
+              Percentile(local_model_alloc, 0.5), Percentile(local_model_alloc, 1.0));
   std::printf("  heap allocations per step: median %.0f, max %.0f (W, ũ, μ are resized when the contact count changes)\n",
               Percentile(alloc_per_step, 0.5), Percentile(alloc_per_step, 1.0));
   std::printf("  contacts per step: median %.0f, max %.0f; broad-phase region: median %.0f, max %.0f of %zu "

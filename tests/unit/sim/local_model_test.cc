@@ -93,6 +93,29 @@ TEST(LocalContactModel, FrictionlessPressMatchesFiniteDifferencesAndIsASymmetric
             1e-9 * k.norm())
       << "negative semi-definite:\n" << k;
   ExpectMatchesFiniteDifferences(model, path, at.model, 1e-7, 5e-3);  // measured 0.12 %
+  // A straight press on the top face: the device is pushed up, and the resultant's normal
+  // says so independently of the force (it is built from the contact normals and r_n).
+  EXPECT_GT(at.model.device_force_n.z(), 0.0);
+  EXPECT_GT(at.model.normal_device.z(), 0.999) << at.model.normal_device.transpose();
+  EXPECT_NEAR(at.model.normal_device.norm(), 1.0, 1e-12);
+  EXPECT_EQ(at.model.friction_coefficient, 0.0);
+}
+
+TEST(LocalContactModel, TheBuilderGivesTheOneOffModelAndKeepsItsBuffers) {
+  // The server keeps one builder per session: same model as the one-off call, step after step.
+  const TwoBodyModel model(CoarseScene(0.3));
+  TwoBodySession session(model);
+  LocalModelBuilder builder;
+  for (const Eigen::Vector3d& d : PressAndSlide(10)) {
+    session.Step(d);
+    const LocalContactModel& kept = builder.Linearize(session);
+    const LocalContactModel fresh = LinearizeLastStep(session);
+    EXPECT_EQ(kept.stiffness_n_per_m, fresh.stiffness_n_per_m);
+    EXPECT_EQ(kept.normal_device, fresh.normal_device);
+    EXPECT_EQ(kept.sticking + kept.sliding, fresh.sticking + fresh.sliding);
+  }
+  EXPECT_EQ(builder.model().friction_coefficient, 0.3);
+  EXPECT_GT(builder.model().sticking + builder.model().sliding, 0) << "the slide ends in contact";
 }
 
 TEST(LocalContactModel, StickingPressMatchesFiniteDifferencesInEveryDirection) {
@@ -127,6 +150,7 @@ TEST(LocalContactModel, NoContactGivesNoStiffness) {
   const LocalContactModel local = LinearizeLastStep(session);
   EXPECT_EQ(local.stiffness_n_per_m, Eigen::Matrix3d::Zero());
   EXPECT_EQ(local.device_force_n, Eigen::Vector3d::Zero());
+  EXPECT_EQ(local.normal_device, Eigen::Vector3d::Zero()) << "no contact force, no normal";
 }
 
 }  // namespace

@@ -1,0 +1,256 @@
+// The force renderer (client/phantom/force_renderer.h): what each mode renders for given
+// arrivals and positions (checked against the formulas by hand), the bounds the network cannot
+// break (no pull, the friction cone, the stiffness and extrapolation caps, no jump when models
+// change, non-finite input), and the closed loop it exists for: a 0.05 kg device pulled by a
+// hand spring 2 mm into a 2000 N/m wall whose force and model are computed from the position
+// one round trip ago, with the device's safety filter (7.9 N, 250 N/s beyond the model's
+// response to the device's own motion) in the loop.
+#include "force_renderer.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <deque>
+#include <limits>
+
+#include "phantom.h"
+
+namespace hapco::phantom {
+namespace {
+
+constexpr double kTick = 1e-3;
+
+// A top-face contact: pushes along +z with stiffness k in z (and k/2 across, a sticking
+// contact), the model answered at z0.
+ReceivedModel TopFaceModel(double z0_m, double k_n_per_m, double mu) {
+  ReceivedModel m;
+  m.valid = true;
+  m.position_m = Eigen::Vector3d(0, 0, z0_m);
+  m.stiffness_n_per_m = Eigen::Vector3d(-0.5 * k_n_per_m, -0.5 * k_n_per_m, -k_n_per_m).asDiagonal();
+  m.normal = Eigen::Vector3d::UnitZ();
+  m.friction_coefficient = mu;
+  return m;
+}
+
+// Renders `ticks` ticks at `position` after one arrival, returns the last command.
+Eigen::Vector3d RenderAt(ForceRenderer* r, const Eigen::Vector3d& force, const ReceivedModel& m,
+                         const Eigen::Vector3d& position, int ticks) {
+  Eigen::Vector3d out = r->Command(true, force, m, position, Eigen::Vector3d::Zero(), kTick);
+  for (int k = 1; k < ticks; ++k) out = r->Command(false, force, m, position, Eigen::Vector3d::Zero(), kTick);
+  return out;
+}
+
+RendererParameters LocalModel() {
+  RendererParameters p;
+  p.mode = RenderMode::kLocalModel;
+  return p;
+}
+
+TEST(ForceRenderer, DirectModeRendersTheNewestForceAndHoldsIt) {
+  ForceRenderer r;  // direct
+  const ReceivedModel m = TopFaceModel(-1e-3, 1000, 0.5);
+  EXPECT_EQ(r.Command(true, {0, 0, 2}, m, {0, 0, -3e-3}, {}, kTick), Eigen::Vector3d(0, 0, 2));
+  EXPECT_EQ(r.Command(false, {9, 9, 9}, m, {0, 0, -9e-3}, {}, kTick), Eigen::Vector3d(0, 0, 2))
+      << "no arrival: the held force, whatever the position";
+  EXPECT_FALSE(r.changes_between_arrivals());
+  EXPECT_EQ(r.stats().model_ticks, 0u);
+}
+
+TEST(ForceRenderer, LocalModelIsEvaluatedAtTheCurrentPosition) {
+  ForceRenderer r(LocalModel());
+  const ReceivedModel m = TopFaceModel(-1e-3, 1000, 0.5);
+  // 0.5 mm further in: 2 N + 1000 N/m x 0.5 mm = 2.5 N (after the 5-tick blend from nothing).
+  const Eigen::Vector3d f = RenderAt(&r, {0, 0, 2}, m, {0, 0, -1.5e-3}, 10);
+  EXPECT_NEAR(f.z(), 2.5, 1e-12);
+  EXPECT_NEAR(f.head<2>().norm(), 0.0, 1e-12);
+  // Later ticks follow the device without new arrivals: 0.2 mm less deep, 0.2 N less.
+  const Eigen::Vector3d g = r.Command(false, {0, 0, 2}, m, {0, 0, -1.3e-3}, {}, kTick);
+  EXPECT_NEAR(g.z(), 2.3, 1e-12);
+  EXPECT_TRUE(r.changes_between_arrivals());
+  EXPECT_EQ(r.stats().models_received, 1u);
+}
+
+TEST(ForceRenderer, TheModelNeverPulls) {
+  ForceRenderer r(LocalModel());
+  const ReceivedModel m = TopFaceModel(-1e-3, 1000, 0.5);
+  // 3 mm above the model's pose the linear model says 2 - 3 = -1 N: the contact has opened.
+  const Eigen::Vector3d f = RenderAt(&r, {0, 0, 2}, m, {0, 0, 2e-3}, 10);
+  EXPECT_EQ(f, Eigen::Vector3d::Zero());
+  EXPECT_GT(r.stats().pull_prevented, 0u);
+}
+
+TEST(ForceRenderer, TheTangentialPartStaysInTheFrictionCone) {
+  ForceRenderer r(LocalModel());
+  const ReceivedModel m = TopFaceModel(-1e-3, 1000, 0.3);
+  // 4 mm sideways at the same depth: 2 N up, 2 N across (500 N/m x 4 mm) > 0.3 x 2 N.
+  const Eigen::Vector3d f = RenderAt(&r, {0, 0, 2}, m, {4e-3, 0, -1e-3}, 10);
+  EXPECT_NEAR(f.z(), 2.0, 1e-12);
+  EXPECT_NEAR(f.x(), -0.3 * 2.0, 1e-12) << "sliding: the cone's edge, against the motion";
+  EXPECT_GT(r.stats().cone_limited, 0u);
+  // The server's own force at the model's pose is never changed by the limit, even outside
+  // the scene's cone (an edge contact can tilt the resultant).
+  ForceRenderer s(LocalModel());
+  const Eigen::Vector3d at_pose = RenderAt(&s, {1.5, 0, 2}, m, m.position_m, 10);
+  EXPECT_NEAR((at_pose - Eigen::Vector3d(1.5, 0, 2)).norm(), 0.0, 1e-12);
+}
+
+TEST(ForceRenderer, StiffnessAndExtrapolationAreCapped) {
+  RendererParameters p = LocalModel();
+  p.max_stiffness_n_per_m = 3000;
+  p.max_extrapolation_m = 0.005;
+  ForceRenderer r(p);
+  const ReceivedModel stiff = TopFaceModel(-1e-3, 1e6, 0.5);  // a rigid contact's W: huge K
+  // 1 um further in: 3000 N/m (the cap, along the stiffest direction) x 1 um.
+  const Eigen::Vector3d f = RenderAt(&r, {0, 0, 2}, stiff, {0, 0, -1.001e-3}, 10);
+  EXPECT_NEAR(f.z(), 2.0 + 3000 * 1e-6, 1e-9);
+  EXPECT_EQ(r.stats().stiffness_capped, 1u);
+  // 10 mm further in is evaluated at 5 mm: 2 + 3000 x 5 mm.
+  const Eigen::Vector3d far = r.Command(false, {0, 0, 2}, stiff, {0, 0, -11e-3}, {}, kTick);
+  EXPECT_NEAR(far.z(), 2.0 + 3000 * 5e-3, 1e-9);
+  EXPECT_GT(r.stats().extrapolation_capped, 0u);
+}
+
+TEST(ForceRenderer, ANewModelTakesOverWithoutAJump) {
+  RendererParameters p = LocalModel();
+  p.blend_ticks = 5;
+  ForceRenderer r(p);
+  const Eigen::Vector3d x(0, 0, -1e-3);
+  RenderAt(&r, {0, 0, 2}, TopFaceModel(-1e-3, 1000, 0.5), x, 10);
+  // The next model says 1 N more at the same place: the command moves there in 5 equal steps.
+  Eigen::Vector3d previous(0, 0, 2);
+  for (int k = 1; k <= 8; ++k) {
+    const Eigen::Vector3d f = r.Command(k == 1, {0, 0, 3}, TopFaceModel(-1e-3, 1000, 0.5), x, {}, kTick);
+    EXPECT_LE((f - previous).norm(), 1.0 / 5 + 1e-12) << "tick " << k;
+    if (k >= 5) {
+      EXPECT_NEAR(f.z(), 3.0, 1e-12) << "tick " << k;
+    }
+    previous = f;
+  }
+}
+
+TEST(ForceRenderer, ANoContactAnswerKeepsTheModelOnlyWhereTheModelAgrees) {
+  ForceRenderer r(LocalModel());
+  RenderAt(&r, {0, 0, 2}, TopFaceModel(-1e-3, 1000, 0.5), {0, 0, -1e-3}, 10);
+  // "No contact" for a pose 1 mm above the surface: the model gives no force there either, so
+  // it stays, and the device coming back in meets the surface at once: 2 + 1000 x 0.5 mm.
+  ReceivedModel none;
+  none.position_m = Eigen::Vector3d(0, 0, 1e-3);
+  Eigen::Vector3d f = RenderAt(&r, Eigen::Vector3d::Zero(), none, {0, 0, -1.5e-3}, 10);
+  EXPECT_NEAR(f.z(), 2.5, 1e-12);
+  EXPECT_EQ(r.stats().models_kept, 1u);
+  // "No contact" at a pose where the model pushes (the tool left the obstacle sideways): the
+  // model is wrong there and is dropped: the force as it came (zero).
+  none.position_m = Eigen::Vector3d(0, 0, -1.5e-3);
+  f = RenderAt(&r, Eigen::Vector3d::Zero(), none, {0, 0, -1.5e-3}, 10);
+  EXPECT_EQ(f, Eigen::Vector3d::Zero());
+  EXPECT_EQ(r.stats().models_kept, 1u);
+}
+
+TEST(ForceRenderer, NonFiniteArrivalsAndModelsAreIgnored) {
+  ForceRenderer r(LocalModel());
+  const ReceivedModel good = TopFaceModel(-1e-3, 1000, 0.5);
+  RenderAt(&r, {0, 0, 2}, good, {0, 0, -1e-3}, 10);
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  // A NaN force: the model in use stays.
+  Eigen::Vector3d f = r.Command(true, {nan, 0, 0}, good, {0, 0, -1.5e-3}, {}, kTick);
+  EXPECT_NEAR(f.z(), 2.5, 1e-12);
+  // A finite force with a broken model: rendered as a force without model (after the blend).
+  ReceivedModel broken = good;
+  broken.stiffness_n_per_m(0, 0) = nan;
+  f = RenderAt(&r, {0, 0, 4}, broken, {0, 0, -1.5e-3}, 10);
+  EXPECT_TRUE(f.allFinite());
+  EXPECT_EQ(f, Eigen::Vector3d(0, 0, 4));
+  ReceivedModel not_unit = good;
+  not_unit.normal = Eigen::Vector3d(0, 0, 2);
+  f = RenderAt(&r, {0, 0, 5}, not_unit, {0, 0, -1.5e-3}, 10);
+  EXPECT_EQ(f, Eigen::Vector3d(0, 0, 5)) << "a normal that is not a unit vector is not a model";
+}
+
+// The delayed wall, closed loop: device mass, hand spring to 2 mm inside, wall 2000 N/m; the
+// server's answer to the pose of `delay_ticks` ago arrives each tick (force at that pose and
+// its exact model: for a wall the linear model is the wall itself). Safety filter in the loop.
+struct LoopRun {
+  double bounce_m = 0;       // peak-to-peak z over the last 0.5 s
+  double final_z_m = 0;      // mean z over the last 0.5 s
+  double max_force_n = 0;    // largest rendered |F|
+  // Largest change of the rendered force per tick beyond what a spring of the renderer's
+  // stiffness cap explains for the device's motion in that tick: |ΔF| - K_cap |Δx|, N.
+  double max_unexplained_change_n = 0;
+  double dissipated_j = 0;
+  bool finite = true;
+};
+
+LoopRun RunDelayedWall(RendererParameters parameters, int delay_ticks) {
+  const double mass = 0.05, device_damping = 0.5, hand_k = 300.0, wall_k = 2000.0, target = -0.002;
+  ForceRenderer renderer(parameters);
+  SafetyFilter safety;
+  double x = 0.001, v = 0.0;
+  std::deque<double> positions(static_cast<std::size_t>(delay_ticks) + 1, x);
+  LoopRun run;
+  double lo = 1e9, hi = -1e9, sum = 0, previous = 0, previous_x = x;
+  int counted = 0;
+  const int ticks = 3000;
+  for (int n = 0; n < ticks; ++n) {
+    positions.push_back(x);
+    positions.pop_front();
+    const double answered = positions.front();
+    const Eigen::Vector3d force(0, 0, answered < 0 ? -wall_k * answered : 0.0);
+    ReceivedModel model;
+    model.valid = answered < 0;
+    model.position_m = Eigen::Vector3d(0, 0, answered);
+    model.stiffness_n_per_m = Eigen::Vector3d(0, 0, -wall_k).asDiagonal();
+    model.normal = Eigen::Vector3d::UnitZ();
+    const Eigen::Vector3d velocity(0, 0, v);
+    const Eigen::Vector3d command = renderer.Command(true, force, model, Eigen::Vector3d(0, 0, x), velocity, kTick);
+    const Eigen::Vector3d rendered = safety.Update(true, command, n * kTick, renderer.motion_change_n());
+    run.finite = run.finite && rendered.allFinite();
+    run.max_force_n = std::max(run.max_force_n, rendered.norm());
+    run.max_unexplained_change_n =
+        std::max(run.max_unexplained_change_n,
+                 std::abs(rendered.z() - previous) - parameters.max_stiffness_n_per_m * std::abs(x - previous_x));
+    previous = rendered.z();
+    previous_x = x;
+    const double acceleration = (hand_k * (target - x) - device_damping * v + rendered.z()) / mass;
+    v += acceleration * kTick;
+    x += v * kTick;
+    if (n >= ticks - 500) lo = std::min(lo, x), hi = std::max(hi, x), sum += x, ++counted;
+  }
+  run.bounce_m = hi - lo;
+  run.final_z_m = sum / counted;
+  run.dissipated_j = renderer.passivity().dissipated_j();
+  return run;
+}
+
+TEST(ForceRenderer, TheLocalModelHoldsADelayedWallWhereDirectRenderingBounces) {
+  // Static equilibrium: 300 (-2 mm - z) = 2000 z -> z = -0.26 mm, wall force 0.52 N.
+  const double equilibrium_z = 300.0 * -0.002 / (300.0 + 2000.0);
+  for (int delay : {5, 20, 50, 100}) {
+    RendererParameters direct, direct_pc, model, model_pc;
+    direct_pc.passivity = true;
+    model.mode = model_pc.mode = RenderMode::kLocalModel;
+    model_pc.passivity = true;
+    const LoopRun d = RunDelayedWall(direct, delay), dp = RunDelayedWall(direct_pc, delay);
+    const LoopRun m = RunDelayedWall(model, delay), mp = RunDelayedWall(model_pc, delay);
+    std::printf("round trip %3d ms: bounce direct %.3f mm, direct+passivity %.3f mm, local model %.4f mm, "
+                "local model+passivity %.4f mm; final z local model %.4f mm (equilibrium %.4f mm); "
+                "dissipated %.3g / %.3g J\n",
+                delay, d.bounce_m * 1e3, dp.bounce_m * 1e3, m.bounce_m * 1e3, mp.bounce_m * 1e3, m.final_z_m * 1e3,
+                equilibrium_z * 1e3, dp.dissipated_j, mp.dissipated_j);
+    for (const LoopRun* r : {&d, &dp, &m, &mp}) {
+      EXPECT_TRUE(r->finite);
+      EXPECT_LE(r->max_force_n, 7.9 + 1e-12) << "the device limit holds in every mode";
+      // The rate limit: 0.25 N per tick, plus (local model) at most a 3000 N/m spring's
+      // response to the device's own motion: a wall pushes back as fast as it is entered.
+      EXPECT_LE(r->max_unexplained_change_n, 0.25 + 1e-12) << "and the rate limit";
+    }
+    EXPECT_GT(d.bounce_m, 0.5e-3) << "direct rendering bounces at " << delay << " ms";
+    EXPECT_LT(m.bounce_m, 0.01e-3) << "the local model holds still at " << delay << " ms";
+    EXPECT_NEAR(m.final_z_m, equilibrium_z, 0.01e-3) << "and where the wall and the hand balance";
+    EXPECT_LT(mp.bounce_m, 0.01e-3);
+  }
+}
+
+}  // namespace
+}  // namespace hapco::phantom
