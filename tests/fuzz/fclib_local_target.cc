@@ -69,9 +69,10 @@ void WriteDataset(hid_t file, const std::string& name, int expected, Fields* f) 
   const std::uint8_t how = f->Byte();
   if (how % 8 == 7) return;  // absent
   const int kind = how % 8 == 6 ? 2 : (how % 8 >= 3 ? 1 : 0);  // 0 int, 1 double, 2 string
-  int count = expected;
-  if ((how >> 3) % 4 == 3) count = std::max(0, expected + static_cast<int>(static_cast<std::int8_t>(f->Byte())) % 5);
-  count = std::clamp(count, 0, 256);
+  // In 64 bits: `expected` is fuzzed and may be INT_MAX (UB in int, found by the long run).
+  long long count = expected;
+  if ((how >> 3) % 4 == 3) count = std::max(0LL, count + static_cast<int>(static_cast<std::int8_t>(f->Byte())) % 5);
+  count = std::clamp(count, 0LL, 256LL);
   const hsize_t dims[1] = {static_cast<hsize_t>(count)};
   if (kind == 2) {
     std::string text(1, 's');  // (not "s" + to_string: GCC 12 warns -Wrestrict falsely)
