@@ -26,6 +26,7 @@
 #include "common/realtime.h"
 #include "common/statistics.h"
 #include "io/scene_file.h"
+#include "io/trajectory_file.h"
 #include "loadtest_metrics.h"
 #include "phantom.h"
 #include "phantom_client.h"
@@ -42,6 +43,7 @@ Exit code: 0 when it ran (also if it measured misses), 1 bad input, 2 no server 
 
 struct Options {
   std::string scene_path, mode = "kinematic", prefix = "lt", csv_dir, security_dir, render = "direct";
+  std::string trajectory = "scene";
   int clients = 0, domain = 0, rt_priority = 0;
   double duration_s = 0, stagger_ms = 100, timeout_ms = 50, connect_timeout_s = 30, max_model_stiffness_n_per_m = 3000;
   bool loop = false, plots = false, quiet = false, passivity = false;
@@ -69,6 +71,10 @@ bool Parse(int argc, char** argv, Options* o) {
   command.AddDuration(&o->duration_s, "seconds each client runs (required)");
   command.AddNumber("--stagger-ms", &o->stagger_ms, "M", "client i starts i*M ms after client 0 (default 100)",
                     "Run", 0, HUGE_VAL);
+  command.AddText("--trajectory", &o->trajectory, "T",
+                  "scene (default: the scene's phases, one step per tick) or a CSV file, one row per tick, columns "
+                  "x_m,y_m,z_m or dx_m,dy_m,dz_m found by header name (as hapco-phantom --trajectory)",
+                  "Run");
   command.AddFlag("--trajectory-loop", &o->loop,
                   "go back and forth along the scene's trajectory for the whole run (default: run it once, then "
                   "hold its last point)",
@@ -342,7 +348,8 @@ int Run(const Options& o) {
   using namespace hapco;
   const auto t0 = std::chrono::steady_clock::now();
   const sim::SceneSpec scene = io::LoadSceneFile(o.scene_path);
-  const std::vector<Eigen::Vector3d> points = scene.DeviceTrajectory();
+  const std::vector<Eigen::Vector3d> points =
+      o.trajectory == "scene" ? scene.DeviceTrajectory() : io::LoadTrajectoryCsv(o.trajectory);
 
   phantom::ClientConfig base;
   base.domain = o.domain;

@@ -59,8 +59,8 @@ Eigen::Vector3d ForceRenderer::Evaluate(const ActiveModel& active, const Eigen::
 }
 
 Eigen::Vector3d ForceRenderer::Command(bool fresh, const Eigen::Vector3d& force_n, const ReceivedModel& model,
-                                       const Eigen::Vector3d& position_m, const Eigen::Vector3d& velocity_m_per_s,
-                                       double tick_s) {
+                                       const Eigen::Vector3d& position_m, const Eigen::Vector3d& /*velocity_m_per_s*/,
+                                       double /*tick_s*/) {
   const bool force_ok = fresh && force_n.allFinite();
   if (force_ok) held_force_n_ = force_n;
   Eigen::Vector3d command = held_force_n_;
@@ -114,8 +114,16 @@ Eigen::Vector3d ForceRenderer::Command(bool fresh, const Eigen::Vector3d& force_
     if (current_.valid) ++stats_.model_ticks;
   }
   last_position_m_ = position_m;
-  if (parameters_.passivity) command = passivity_.Filter(command, velocity_m_per_s, tick_s);
   return command;
+}
+
+Eigen::Vector3d ForceRenderer::Damp(const Eigen::Vector3d& rendered_n, const Eigen::Vector3d& velocity_m_per_s,
+                                    double tick_s, double max_force_n) {
+  if (!parameters_.passivity) return rendered_n;
+  Eigen::Vector3d out = passivity_.Filter(rendered_n, velocity_m_per_s, tick_s);
+  const double magnitude = out.norm();
+  if (magnitude > max_force_n) out *= max_force_n / magnitude;
+  return out.allFinite() ? out : rendered_n;
 }
 
 }  // namespace hapco::phantom

@@ -7,9 +7,9 @@
 //                evaluated at the device's *current* position every tick: F0 + K (x - x0), so
 //                the stiffness the hand feels is the contact's, not a stale force's (model-
 //                mediated teleoperation: Mitra & Niemeyer 2008; Schuwerk et al., WHC 2015);
-//   + passivity  either of them through the time-domain passivity controller (passivity.h),
-//                which adds damping exactly when the energy the device has received goes
-//                negative (a delay generating energy).
+//   + passivity  either of them, then the time-domain passivity controller (passivity.h) on
+//                what the safety filter lets through: damping exactly when the energy the
+//                device has received goes negative (a delay generating energy).
 //
 // The model is used within bounds the network cannot break: its stiffness is scaled down to
 // what the device can render stably (max_stiffness_n_per_m), it is evaluated at most
@@ -72,9 +72,9 @@ class ForceRenderer {
   explicit ForceRenderer(const RendererParameters& parameters = {});
 
   // One tick. fresh: a new stepped force arrived this tick (force_n as received, model its
-  // FeedbackForce.model). position_m, velocity_m_per_s: the device now; tick_s: the servo
-  // period. Returns the force to hand to the safety filter (N, not yet limited). A non-finite
-  // force or model is ignored (the previous one stays).
+  // FeedbackForce.model). position_m: the device now. Returns the force to hand to the
+  // safety filter (N, not yet limited); the passivity controller comes after it (Damp). A
+  // non-finite force or model is ignored (the previous one stays).
   Eigen::Vector3d Command(bool fresh, const Eigen::Vector3d& force_n, const ReceivedModel& model,
                           const Eigen::Vector3d& position_m, const Eigen::Vector3d& velocity_m_per_s,
                           double tick_s);
@@ -84,11 +84,16 @@ class ForceRenderer {
   // changed this tick). For SafetyFilter::Update's motion_n.
   const Eigen::Vector3d& motion_change_n() const { return motion_change_n_; }
 
-  // The command changes between arrivals (local-model or passivity): the safety filter must
-  // take it every tick (SafetyFilter::Retarget), not only on arrivals.
-  bool changes_between_arrivals() const {
-    return parameters_.mode == RenderMode::kLocalModel || parameters_.passivity;
-  }
+  // The command changes between arrivals (local-model): the safety filter must take it every
+  // tick (SafetyFilter::Retarget), not only on arrivals.
+  bool changes_between_arrivals() const { return parameters_.mode == RenderMode::kLocalModel; }
+
+  // The passivity controller on the force the safety filter lets through (with --passivity;
+  // else the force unchanged): the observer sees exactly what the device renders, the damper
+  // -α v is added after the rate limit (a damper only takes energy out) and the sum is clamped
+  // to max_force_n (when the clamp binds, E may go below 0 by what it cut).
+  Eigen::Vector3d Damp(const Eigen::Vector3d& rendered_n, const Eigen::Vector3d& velocity_m_per_s, double tick_s,
+                       double max_force_n);
   const RendererParameters& parameters() const { return parameters_; }
   const RendererStats& stats() const { return stats_; }
   const PassivityController& passivity() const { return passivity_; }

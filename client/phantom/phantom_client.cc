@@ -294,6 +294,7 @@ void PhantomClient::Run(const std::atomic<bool>& stop, const std::function<void(
     } else {
       rendered = safety.Update(fresh, raw, now_s);  // direct, or a non-finite arrival (rejected, counted)
     }
+    rendered = renderer.Damp(rendered, velocity, tick_s, config_.safety.max_force_n);
     stats_.peak_rendered_n = std::max(stats_.peak_rendered_n, rendered.norm());
     const bool stale = safety.stale();
     if (stale && !was_stale) {
