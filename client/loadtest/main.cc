@@ -42,11 +42,12 @@ constexpr const char* kFooter =
 Exit code: 0 when it ran (also if it measured misses), 1 bad input, 2 no server found (no client connected), 3 DDS failure.)";
 
 struct Options {
-  std::string scene_path, mode = "kinematic", prefix = "lt", csv_dir, security_dir, render = "direct";
+  std::string scene_path, mode = "kinematic", prefix = "lt", csv_dir, security_dir, render = "auto";
   std::string trajectory = "scene";
   int clients = 0, domain = 0, rt_priority = 0;
   double duration_s = 0, stagger_ms = 100, timeout_ms = 50, connect_timeout_s = 30, max_model_stiffness_n_per_m = 3000;
-  bool loop = false, plots = false, quiet = false, passivity = false;
+  bool loop = false, plots = false, quiet = false;
+  hapco::phantom::RendererParameters rendering;  // --render resolved (auto -> by --mode)
 };
 
 // "out", "out/" and "./out" are the same directory.
@@ -84,7 +85,7 @@ bool Parse(int argc, char** argv, Options* o) {
                     "device (hapco-phantom --help)",
                     "Device");
   command.AddForceTimeout(&o->timeout_ms);
-  command.AddRendering(&o->render, &o->passivity, &o->max_model_stiffness_n_per_m);
+  command.AddRendering(&o->render, &o->max_model_stiffness_n_per_m);
   command.AddDomain(&o->domain);
   command.AddSecurity(&o->security_dir,
                       "DIR/loadtest-<prefix>, one identity for every client and the status view (scripts/dds-security "
@@ -107,6 +108,8 @@ bool Parse(int argc, char** argv, Options* o) {
   command.Deprecate("--timeout-ms", "--force-timeout-ms");
   command.Deprecate("--duration", "--duration-s");
   if (!command.Parse(argc, argv)) return false;
+  hapco::phantom::ParseRendering(o->render, o->mode == "hand", &o->rendering);  // a checked choice
+  o->rendering.max_stiffness_n_per_m = o->max_model_stiffness_n_per_m;
 
   if (plots->count() > 0) {
     std::error_code error;
@@ -324,8 +327,8 @@ void WriteSummaryRow(std::FILE* f, const Row& r, const Options& o, const ServerS
                r.render_p99, std::sqrt(st.tracking_ms_n2), std::sqrt(st.server_ms_n2), st.d2_rendered_ms_n2,
                st.d2_server_ms_n2, st.hf_ratio, r.passivity_min_j, r.passivity_final_j, r.passivity_max_drop_j,
                r.passivity_min_j < -tolerance_j ? 1 : 0, s.step_p50_us, s.step_p99_us, s.step_max_us, s.cpu_use,
-               s.periods, s.sessions_max, static_cast<unsigned long long>(s.superseded), o.render.c_str(),
-               o.passivity ? 1 : 0, r.dissipated_j, static_cast<unsigned long long>(r.model_ticks));
+               s.periods, s.sessions_max, static_cast<unsigned long long>(s.superseded),
+               hapco::phantom::RenderingName(o.rendering).c_str(), o.rendering.passivity ? 1 : 0, r.dissipated_j, static_cast<unsigned long long>(r.model_ticks));
 }
 
 void PrintRow(const Row& r) {
@@ -360,9 +363,7 @@ int Run(const Options& o) {
   base.safety.timeout_s = o.timeout_ms * 1e-3;
   base.connect_timeout_s = o.connect_timeout_s;
   base.drain_ticks = static_cast<int>(std::lround(o.timeout_ms));
-  phantom::ParseRenderMode(o.render, &base.render.mode);  // a choice: checked by the parser
-  base.render.passivity = o.passivity;
-  base.render.max_stiffness_n_per_m = o.max_model_stiffness_n_per_m;
+  base.render = o.rendering;
   const double tick_s = base.safety.tick_s;
 
   if (!o.csv_dir.empty()) std::filesystem::create_directories(o.csv_dir);
@@ -578,9 +579,9 @@ int Run(const Options& o) {
   all.render_p99 = hapco::QuantileOf(all_render, 0.99);
 
   std::printf("hapco-loadtest: %zu of %d clients ran %.1f s each (%s, render %s%s%s)%s\n", ran.size(), o.clients,
-              o.duration_s, o.mode.c_str(), o.render.c_str(), o.passivity ? " + passivity" : "",
+              o.duration_s, o.mode.c_str(), phantom::RenderingName(o.rendering).c_str(), "",
               o.loop ? ", trajectory looped" : "", g_stop.load() ? " - stopped by signal" : "");
-  if (o.render == "local-model" || o.passivity) {
+  if (o.rendering.mode == phantom::RenderMode::kLocalModel || o.rendering.passivity) {
     std::printf("rendering: %llu ticks from a local model; passivity controller dissipated %.4f J\n",
                 static_cast<unsigned long long>(all.model_ticks), all.dissipated_j);
   }

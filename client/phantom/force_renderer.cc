@@ -20,6 +20,20 @@ bool ParseRenderMode(std::string_view name, RenderMode* mode) {
 
 const char* RenderModeName(RenderMode mode) { return mode == RenderMode::kDirect ? "direct" : "local-model"; }
 
+bool ParseRendering(std::string_view name, bool hand_held, RendererParameters* parameters) {
+  if (name == "auto") name = hand_held ? "local-model+passivity" : "direct";
+  constexpr std::string_view kPassivity = "+passivity";
+  const bool passivity = name.size() > kPassivity.size() && name.substr(name.size() - kPassivity.size()) == kPassivity;
+  if (passivity) name.remove_suffix(kPassivity.size());
+  if (!ParseRenderMode(name, &parameters->mode)) return false;
+  parameters->passivity = passivity;
+  return true;
+}
+
+std::string RenderingName(const RendererParameters& parameters) {
+  return std::string(RenderModeName(parameters.mode)) + (parameters.passivity ? "+passivity" : "");
+}
+
 ForceRenderer::ForceRenderer(const RendererParameters& parameters)
     : parameters_(parameters), passivity_(parameters.max_damping_n_s_per_m) {
   HAPCO_ASSERT(parameters.max_stiffness_n_per_m > 0 && parameters.max_extrapolation_m >= 0 &&

@@ -24,6 +24,7 @@
 
 #include <cmath>
 #include <cstdint>
+#include <string>
 #include <string_view>
 
 #include "passivity.h"
@@ -56,6 +57,14 @@ struct RendererParameters {
   int blend_ticks = 5;                 // a new model replaces the old one over this many ticks
   double max_damping_n_s_per_m = 100.0;  // the passivity controller's cap, N s/m (passivity.h)
 };
+
+// The --render value ("direct", "direct+passivity", "local-model", "local-model+passivity", or
+// "auto": direct for a kinematic device, local-model+passivity for a hand-held one) into
+// parameters->mode and ->passivity; false for anything else.
+struct RendererParameters;
+bool ParseRendering(std::string_view name, bool hand_held, RendererParameters* parameters);
+// "local-model+passivity" and the like.
+std::string RenderingName(const RendererParameters& parameters);
 
 struct RendererStats {
   uint64_t model_ticks = 0;          // ticks rendered from a model

@@ -34,8 +34,7 @@ Exit code: 0 done, 1 bad input, 2 no server found, 3 DDS failure.)";
 
 struct Options {
   std::string scene_path, client_id, mode = "kinematic", trajectory = "scene", csv_path, security_dir;
-  std::string render = "direct";
-  bool passivity = false;
+  std::string render = "auto";
   int domain = 0, rt_priority = 0;
   double duration_s = 0, timeout_ms = 50, connect_timeout_s = 30, max_model_stiffness_n_per_m = 3000;
 };
@@ -54,7 +53,7 @@ bool Parse(int argc, char** argv, Options* o) {
                     "positions quantised to 0.023 mm",
                     "Device");
   command.AddForceTimeout(&o->timeout_ms);
-  command.AddRendering(&o->render, &o->passivity, &o->max_model_stiffness_n_per_m);
+  command.AddRendering(&o->render, &o->max_model_stiffness_n_per_m);
   command.AddText("--trajectory", &o->trajectory, "T",
                   "scene (default: the scene's phases, one step per tick) or a CSV file, one row per tick, columns "
                   "x_m,y_m,z_m or dx_m,dy_m,dz_m found by header name (hapco-server --trace, hapco-sim --csv, "
@@ -123,8 +122,7 @@ int Run(const Options& o) {
   config.safety.timeout_s = o.timeout_ms * 1e-3;
   config.connect_timeout_s = o.connect_timeout_s;
   config.drain_ticks = static_cast<int>(std::lround(o.timeout_ms));
-  phantom::ParseRenderMode(o.render, &config.render.mode);  // a choice: checked by the parser
-  config.render.passivity = o.passivity;
+  phantom::ParseRendering(o.render, config.mode == phantom::DriveMode::kHand, &config.render);  // a checked choice
   config.render.max_stiffness_n_per_m = o.max_model_stiffness_n_per_m;
 
   std::FILE* csv = nullptr;
@@ -176,9 +174,9 @@ int Run(const Options& o) {
               static_cast<unsigned long long>(s.clamped), s.peak_rendered_n,
               static_cast<unsigned long long>(s.pose_write_errors));
   if (config.render.mode == phantom::RenderMode::kLocalModel || config.render.passivity) {
-    std::printf("  rendering %s%s: %llu ticks from a model (%llu models; stiffness capped %llu, extrapolation capped "
+    std::printf("  rendering %s: %llu ticks from a model (%llu models; stiffness capped %llu, extrapolation capped "
                 "%llu ticks, pull prevented %llu, friction cone %llu); passivity dissipated %.4f J on %lld ticks\n",
-                phantom::RenderModeName(config.render.mode), config.render.passivity ? " + passivity" : "",
+                phantom::RenderingName(config.render).c_str(),
                 static_cast<unsigned long long>(s.render.model_ticks), static_cast<unsigned long long>(s.render.models_received),
                 static_cast<unsigned long long>(s.render.stiffness_capped),
                 static_cast<unsigned long long>(s.render.extrapolation_capped),

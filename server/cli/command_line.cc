@@ -254,16 +254,15 @@ CLI::Option* CommandLine::AddForceTimeout(double* milliseconds) {
                    "Device", 0, HUGE_VAL, true);
 }
 
-void CommandLine::AddRendering(std::string* mode, bool* passivity, double* max_model_stiffness_n_per_m) {
-  AddChoice("--render", mode, {"direct", "local-model"},
-            "direct (default): the newest force, held until the next; local-model: the contact model "
-            "sent with the newest force (stiffness, normal, friction) evaluated at the device's current "
-            "position every tick, for delayed networks (docs/network-haptics.md)",
+void CommandLine::AddRendering(std::string* mode, double* max_model_stiffness_n_per_m) {
+  AddChoice("--render", mode, {"auto", "direct", "direct+passivity", "local-model", "local-model+passivity"},
+            "direct: the newest force, held until the next; local-model: the contact model sent with the "
+            "newest force (stiffness, normal, friction) evaluated at the device's current position every "
+            "tick; +passivity: a time-domain passivity controller on what is rendered (the energy it "
+            "dissipates is reported). auto (default): direct with --mode kinematic (forces compare with "
+            "hapco-sim), local-model+passivity with --mode hand (passive and without oscillation up to a "
+            "50 ms round trip, docs/network-haptics.md)",
             "Device");
-  AddFlag("--passivity", passivity,
-          "time-domain passivity controller: a damper exactly when the energy the device received goes "
-          "negative (the energy it dissipated is reported)",
-          "Device");
   AddNumber("--max-model-stiffness-n-per-m", max_model_stiffness_n_per_m, "K",
             "local-model: the model's stiffness is scaled down to at most K N/m (default 3000, what the "
             "device renders stably)",

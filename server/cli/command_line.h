@@ -75,9 +75,10 @@ class CommandLine {
   CLI::Option* AddConnectTimeout(double* seconds, const std::string& help);
   // --force-timeout-ms T: no new force for T ms -> the rendered force ramps to zero.
   CLI::Option* AddForceTimeout(double* milliseconds);
-  // --render direct|local-model, --passivity, --max-model-stiffness-n-per-m K: how a client
-  // renders the forces it receives (client/phantom/force_renderer.h), group Device.
-  void AddRendering(std::string* mode, bool* passivity, double* max_model_stiffness_n_per_m);
+  // --render auto|direct|direct+passivity|local-model|local-model+passivity and
+  // --max-model-stiffness-n-per-m K: how a client renders the forces it receives
+  // (client/phantom/force_renderer.h, docs/network-haptics.md), group Device.
+  void AddRendering(std::string* mode, double* max_model_stiffness_n_per_m);
   // --duration-s S: how long the tool runs.
   CLI::Option* AddDuration(double* seconds, const std::string& help);
   // --security DIR: run secured with the deployment of scripts/dds-security init DIR; `who`

@@ -111,6 +111,7 @@ TEST(LoadTestProcess, TwoClientsOnLoopbackKeepTheReportInvariants) {
     }
   }
   const auto& all = by_client["all"];
+  EXPECT_EQ(all.at("render"), "direct") << "--render auto with a kinematic device";
   for (const auto& [key, value] : sums) EXPECT_EQ(Int(all, key.c_str()), value) << key;
   // Server status read over DDS: both sessions, real step times.
   EXPECT_GE(Int(all, "server_status_periods"), 1);
@@ -135,7 +136,7 @@ void RunLocalModelClient(bool server_sends_models, const std::string& tag) {
   Process server(server_args, dir + "/server.out", dir + "/server.err");
   {
     Process loadtest({HAPCO_LOADTEST_EXE, kScene, "--clients", "1", "--duration-s", "3", "--domain", domain,
-                      "--mode", "hand", "--render", "local-model", "--passivity", "--client-prefix", "lm",
+                      "--mode", "hand", "--render", "local-model+passivity", "--client-prefix", "lm",
                       "--csv-dir", dir, "--connect-timeout-s", "60"},
                      dir + "/loadtest.out", dir + "/loadtest.err");
     ASSERT_EQ(loadtest.Wait(120'000), 0) << ReadFile(dir + "/loadtest.err");
@@ -146,7 +147,7 @@ void RunLocalModelClient(bool server_sends_models, const std::string& tag) {
   const auto summary = ReadCsv(dir + "/summary.csv");
   ASSERT_EQ(summary.size(), 2u);
   const auto& s = summary[0];
-  EXPECT_EQ(s.at("render"), "local-model");
+  EXPECT_EQ(s.at("render"), "local-model+passivity");
   EXPECT_EQ(Int(s, "passivity_controller"), 1);
   EXPECT_GE(Num(s, "passivity_dissipated_j"), 0.0);
   EXPECT_GT(Int(s, "forces"), 1500);

@@ -48,6 +48,20 @@ RendererParameters LocalModel() {
   return p;
 }
 
+TEST(ForceRenderer, RenderingNamesParseAndAutoDependsOnTheDevice) {
+  RendererParameters p;
+  ASSERT_TRUE(ParseRendering("auto", /*hand_held=*/true, &p));
+  EXPECT_EQ(RenderingName(p), "local-model+passivity");
+  ASSERT_TRUE(ParseRendering("auto", /*hand_held=*/false, &p));
+  EXPECT_EQ(RenderingName(p), "direct") << "a scripted device compares its forces with hapco-sim";
+  for (const char* name : {"direct", "direct+passivity", "local-model", "local-model+passivity"}) {
+    ASSERT_TRUE(ParseRendering(name, true, &p)) << name;
+    EXPECT_EQ(RenderingName(p), name);
+  }
+  EXPECT_FALSE(ParseRendering("local", true, &p));
+  EXPECT_FALSE(ParseRendering("+passivity", true, &p));
+}
+
 TEST(ForceRenderer, DirectModeRendersTheNewestForceAndHoldsIt) {
   ForceRenderer r;  // direct
   const ReceivedModel m = TopFaceModel(-1e-3, 1000, 0.5);
