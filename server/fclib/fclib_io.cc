@@ -83,29 +83,35 @@ using SolutionPtr = std::unique_ptr<fclib_solution, SolutionDeleter>;
 // --- Inspection of the HDF5 layout (so that libfclib, which exits on errors, never fails) ---
 
 // True when every component of the absolute path `name` exists (H5Lexists fails, rather than
-// answering false, when an intermediate group is missing).
-bool Exists(hid_t file, const std::string& name) {
+// answering false, when an intermediate group is missing, so the components are asked one by
+// one). With every parent present, a failing H5Lexists means HDF5 cannot read the link table
+// itself: the file (path) is refused. libfclib tests `if (H5Lexists(...))`, which takes that
+// failure (-1) for "exists" and then exits on the open that follows (found by fuzzing:
+// tests/data/fuzz/fclib_local/corrupt_heap_lexists_fails.h5).
+bool Exists(hid_t file, const std::string& path, const std::string& name) {
   std::string prefix;
   std::size_t start = 1;
   while (start <= name.size()) {
     const std::size_t end = name.find('/', start);
     prefix = name.substr(0, end);
-    if (H5Lexists(file, prefix.c_str(), H5P_DEFAULT) <= 0) return false;
+    const htri_t exists = H5Lexists(file, prefix.c_str(), H5P_DEFAULT);
+    if (exists < 0) Fail(path, "HDF5 cannot look up " + prefix + " (a corrupt link table or heap)");
+    if (exists == 0) return false;
     if (end == std::string::npos) break;
     start = end + 1;
   }
   return true;
 }
 
-H5I_type_t ObjectType(hid_t file, const std::string& name) {
-  if (!Exists(file, name)) return H5I_BADID;
+H5I_type_t ObjectType(hid_t file, const std::string& path, const std::string& name) {
+  if (!Exists(file, path, name)) return H5I_BADID;
   H5Id object(H5Oopen(file, name.c_str(), H5P_DEFAULT), H5Oclose);
   if (!object.valid()) return H5I_BADID;
   return H5Iget_type(object.get());
 }
 
 void RequireGroup(hid_t file, const std::string& path, const std::string& name) {
-  const H5I_type_t type = ObjectType(file, name);
+  const H5I_type_t type = ObjectType(file, path, name);
   if (type == H5I_BADID) Fail(path, "missing group " + name);
   if (type != H5I_GROUP) Fail(path, name + " is not a group");
 }
@@ -125,7 +131,7 @@ struct DatasetShape {
 };
 
 DatasetShape InspectDataset(hid_t file, const std::string& path, const std::string& name) {
-  const H5I_type_t type = ObjectType(file, name);
+  const H5I_type_t type = ObjectType(file, path, name);
   if (type == H5I_BADID) Fail(path, "missing dataset " + name);
   if (type != H5I_DATASET) Fail(path, name + " is not a dataset");
   H5Id dataset(H5Dopen2(file, name.c_str(), H5P_DEFAULT), H5Dclose);
@@ -263,7 +269,7 @@ std::size_t RequireOptionalString(hid_t file, const std::string& path,
                                   const std::string& group, const std::string& leaf) {
   const std::string name = group + "/" + leaf;
   const bool listed = ListedInGroup(file, path, group, leaf);
-  const bool exists = Exists(file, name);
+  const bool exists = Exists(file, path, name);
   if (!listed && !exists) return 0;
   if (!exists) Fail(path, name + " is listed but cannot be opened (corrupt file?)");
   const DatasetShape shape = InspectDataset(file, path, name);
@@ -342,8 +348,8 @@ MatrixLayout CheckMatrixGroup(hid_t file, const std::string& path, const std::st
 // Checks everything fclib_read_local / fclib_read_solution will read, with the sizes their
 // buffers get (libfclib sizes each buffer from m, n, nz, nzmax and reads whole datasets).
 LocalLayout CheckLocalLayout(hid_t file, const std::string& path) {
-  if (!Exists(file, "/fclib_local")) {
-    if (Exists(file, "/fclib_global")) {
+  if (!Exists(file, path, "/fclib_local")) {
+    if (Exists(file, path, "/fclib_global")) {
       Fail(path, "holds a global problem (/fclib_global: M, H, f, w, mu), not a local one "
                  "(/fclib_local: W, q, mu); read it with ReadFclibGlobalProblem");
     }
@@ -355,7 +361,7 @@ LocalLayout CheckLocalLayout(hid_t file, const std::string& path) {
     Fail(path, "spacedim is " + std::to_string(spacedim) +
                    "; HapCo solves 3D contact problems (spacedim 3) only");
   }
-  if (Exists(file, "/fclib_local/V") || Exists(file, "/fclib_local/R")) {
+  if (Exists(file, path, "/fclib_local/V") || Exists(file, path, "/fclib_local/R")) {
     Fail(path, "has V and R (a mixed problem with equality constraints); only plain local "
                "problems (W, q, mu) are supported");
   }
@@ -383,7 +389,7 @@ LocalLayout CheckLocalLayout(hid_t file, const std::string& path) {
   RequireGroup(file, path, "/fclib_local/vectors");
   RequireNumbers(file, path, "/fclib_local/vectors/q", m);
   RequireNumbers(file, path, "/fclib_local/vectors/mu", m / 3);
-  if (Exists(file, "/fclib_local/info")) {
+  if (Exists(file, path, "/fclib_local/info")) {
     RequireGroup(file, path, "/fclib_local/info");
     layout.title_size = RequireOptionalString(file, path, "/fclib_local/info", "title");
     layout.description_size =
@@ -549,8 +555,8 @@ LocalLayout CheckFileInProcess(const std::string& path, bool* has_solution, bool
   } catch (const std::bad_alloc&) {
     Fail(path, "declares datasets too large to read (corrupt file?)");
   }
-  if (has_solution != nullptr) *has_solution = Exists(file.get(), "/solution");
-  if (has_global != nullptr) *has_global = Exists(file.get(), "/fclib_global");
+  if (has_solution != nullptr) *has_solution = Exists(file.get(), path, "/solution");
+  if (has_global != nullptr) *has_global = Exists(file.get(), path, "/fclib_global");
   return layout;
 }
 
@@ -649,8 +655,8 @@ struct GlobalLayout {
 };
 
 GlobalLayout CheckGlobalLayout(hid_t file, const std::string& path) {
-  if (!Exists(file, "/fclib_global")) {
-    if (Exists(file, "/fclib_local")) {
+  if (!Exists(file, path, "/fclib_global")) {
+    if (Exists(file, path, "/fclib_local")) {
       Fail(path, "holds a local problem (/fclib_local: W, q, mu), not a global one; read it with "
                  "ReadFclibLocalProblem");
     }
@@ -661,7 +667,7 @@ GlobalLayout CheckGlobalLayout(hid_t file, const std::string& path) {
   if (spacedim != 3) {
     Fail(path, "spacedim is " + std::to_string(spacedim) + "; HapCo solves 3D contact problems (spacedim 3) only");
   }
-  if (Exists(file, "/fclib_global/G") || Exists(file, "/fclib_global/vectors/b")) {
+  if (Exists(file, path, "/fclib_global/G") || Exists(file, path, "/fclib_global/vectors/b")) {
     Fail(path, "has equality constraints (/fclib_global/G and b: G^T v + b = 0 with multipliers lambda); "
                "HapCo solves global problems without them (M v = H r + f, u = H^T v + w)");
   }
@@ -686,7 +692,7 @@ GlobalLayout CheckGlobalLayout(hid_t file, const std::string& path) {
   RequireNumbers(file, path, "/fclib_global/vectors/f", layout.m.m);
   RequireNumbers(file, path, "/fclib_global/vectors/w", layout.h.n);
   RequireNumbers(file, path, "/fclib_global/vectors/mu", layout.h.n / 3);
-  if (Exists(file, "/fclib_global/info")) {
+  if (Exists(file, path, "/fclib_global/info")) {
     RequireGroup(file, path, "/fclib_global/info");
     layout.title_size = RequireOptionalString(file, path, "/fclib_global/info", "title");
     layout.description_size = RequireOptionalString(file, path, "/fclib_global/info", "description");
@@ -706,7 +712,7 @@ GlobalLayout CheckGlobalFileInProcess(const std::string& path, bool* has_solutio
   } catch (const std::bad_alloc&) {
     Fail(path, "declares datasets too large to read (corrupt file?)");
   }
-  if (has_solution != nullptr) *has_solution = Exists(file.get(), "/solution");
+  if (has_solution != nullptr) *has_solution = Exists(file.get(), path, "/solution");
   return layout;
 }
 
@@ -730,8 +736,8 @@ FclibKind KindInProcess(const std::string& path) {
   CheckIsHdf5File(path);
   H5Id file(H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT), H5Fclose);
   if (!file.valid()) Fail(path, "cannot be opened by HDF5 (corrupt or locked?)");
-  if (Exists(file.get(), "/fclib_local")) return FclibKind::kLocal;
-  if (Exists(file.get(), "/fclib_global")) return FclibKind::kGlobal;
+  if (Exists(file.get(), path, "/fclib_local")) return FclibKind::kLocal;
+  if (Exists(file.get(), path, "/fclib_global")) return FclibKind::kGlobal;
   Fail(path, "is an HDF5 file but not an FCLIB problem (neither /fclib_local nor /fclib_global)");
 }
 

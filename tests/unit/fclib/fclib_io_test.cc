@@ -282,6 +282,14 @@ TEST(FclibRead, FileThatCrashesHdf5IsRefused) {
   EXPECT_THROW(ReadFclibSolution(file), InputError);
 }
 
+// Found by the long fuzz run (tests/data/fuzz/fclib_local): a corrupt local heap makes
+// H5Lexists("/fclib_local/V") fail (-1); libfclib takes -1 for "exists", opens the group and
+// exits the process. The checks now refuse a failing lookup instead of reading it as absent.
+TEST(FclibRead, LinkLookupThatFailsIsRefusedBeforeLibfclibExits) {
+  const std::string file = std::string(HAPCO_SOURCE_DIR) + "/tests/data/fuzz/fclib_local/corrupt_heap_lexists_fails.h5";
+  ExpectInputError(file, "HDF5 cannot look up /fclib_local/V (a corrupt link table or heap)");
+}
+
 // libfclib calls exit(1) when an HDF5 read fails; every such failure must be caught by the
 // checks before it. Corrupt a valid file at random bytes (fixed seed): each read returns a
 // problem or throws InputError, and the test process survives.
