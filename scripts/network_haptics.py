@@ -3,6 +3,7 @@
 
   network_haptics.py trajectory --out FILE        the hand intent (one row per tick, CSV)
   network_haptics.py analyse --runs-dir DIR --out CSV --figures PREFIX
+  network_haptics.py plot --csv CSV --figures PREFIX    (the stability chart from the CSV)
 
 The hand intent: start 1 mm above the surface, press towards 8 mm inside over 0.5 s, hold 1 s,
 slide 10 mm along +x over 1 s, hold 1 s, lift over 0.3 s, rest 0.2 s. The hand (a 300 N/m
@@ -158,16 +159,16 @@ def plot(args, rows, cases, reference):
     except ImportError:
         print("network_haptics.py: matplotlib missing (apt-get install python3-matplotlib): no charts")
         return
-    sweep = [r for r in rows if r["loss_pct"] == 0 and r["jitter_ms"] == 0]
+    sweep = [r for r in rows if float(r["loss_pct"]) == 0 and float(r["jitter_ms"]) == 0]
     fig, axes = plt.subplots(1, 3, figsize=(15, 4.2))
     for mode in MODES:
-        pts = sorted((r["round_trip_ms"], r) for r in sweep if r["mode"] == mode)
+        pts = sorted(((float(r["round_trip_ms"]), r) for r in sweep if r["mode"] == mode), key=lambda p: p[0])
         if not pts:
             continue
         xs = [max(p[0], 0.5) for p in pts]
-        axes[0].plot(xs, [p[1]["oscillation_mm"] for p in pts], "o-", label=mode)
-        axes[1].plot(xs, [p[1]["force_rms_error_pct"] for p in pts], "o-", label=mode)
-        axes[2].plot(xs, [min(p[1]["passivity_min_j"], 0) for p in pts], "o-", label=mode)
+        axes[0].plot(xs, [float(p[1]["oscillation_mm"]) for p in pts], "o-", label=mode)
+        axes[1].plot(xs, [float(p[1]["force_rms_error_pct"]) for p in pts], "o-", label=mode)
+        axes[2].plot(xs, [min(float(p[1]["passivity_min_j"]), 0) for p in pts], "o-", label=mode)
     for ax, title, unit in ((axes[0], "sustained oscillation in the holds", "peak to peak, mm"),
                             (axes[1], "force error vs. the no-delay run", "RMS, % of peak force"),
                             (axes[2], "passivity observer minimum", "min E, J (0 = passive)")):
@@ -177,10 +178,16 @@ def plot(args, rows, cases, reference):
         ax.set_title(title)
         ax.grid(True, which="both", alpha=0.3)
     axes[1].axhline(10, color="k", lw=0.8, ls="--")
+    axes[2].set_yscale("symlog", linthresh=1e-5)
+    axes[2].axhline(-1e-4, color="k", lw=0.8, ls="--")  # the passivity tolerance
+    axes[2].set_ylim(-10, 0)
     axes[0].legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(args.figures + "-stability.png", dpi=110)
     plt.close(fig)
+    if cases is None:
+        print(f"network_haptics.py: chart {args.figures}-stability.png (traces need the runs)")
+        return
     # Traces at 10 / 50 / 200 ms round trip: device height and force magnitude.
     wanted = [10, 50, 200]
     fig, axes = plt.subplots(2, len(wanted), figsize=(15, 6), sharex=True)
@@ -220,6 +227,9 @@ def main():
     a.add_argument("--runs-dir", required=True)
     a.add_argument("--out", required=True)
     a.add_argument("--figures", required=True)
+    c = sub.add_parser("plot", help="the stability chart again from the CSV alone")
+    c.add_argument("--csv", required=True)
+    c.add_argument("--figures", required=True)
     args = p.parse_args()
     if args.command == "trajectory":
         with open(args.out, "w") as f:
@@ -227,6 +237,9 @@ def main():
             f.write(f"0,0,{START_Z!r}\n")  # point 0: the start
             for x, y, z in trajectory():
                 f.write(f"{x!r},{y!r},{z!r}\n")
+    elif args.command == "plot":
+        with open(args.csv) as f:
+            plot(args, list(csv.DictReader(f)), None, None)
     else:
         analyse(args)
 
