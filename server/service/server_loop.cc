@@ -63,7 +63,6 @@ ServerLoop::ServerLoop(std::vector<const sim::TwoBodyModel*> models, dds_domaini
   waitset_.Attach(session_reader_.data_condition(), kSessionToken);
   step_times_us_.reserve(8192);
   stepping_.reserve(static_cast<std::size_t>(options_.max_sessions));
-  step_ns_.resize(static_cast<std::size_t>(options_.max_sessions));
   start_ns_ = MonotonicNowNs();
 }
 
@@ -245,7 +244,7 @@ void ServerLoop::ProcessSessionControls() {
         } else {
           // A restarted client (its sequence starts again): a fresh stream and scene state.
           it->second.session->Reset();
-          it->second.has_pending = false;
+          it->second.num_queued = 0;
           Log(kLogSession, "session of '" + id + "' joined again: reset");
         }
         break;
@@ -262,7 +261,7 @@ void ServerLoop::ProcessSessionControls() {
       case hapco_idl_SESSION_RESET:
         if (it != sessions_.end()) {
           it->second.session->Reset();
-          it->second.has_pending = false;
+          it->second.num_queued = 0;
         }
         break;
       default:
@@ -320,9 +319,8 @@ void ServerLoop::ProcessPoses() {
       ++counters_.poses_before_open;  // the session waits for its recorders (Session::TryOpen)
       continue;
     }
-    if (client->has_pending && pose.sequence_number <= client->pending.sequence_number) {
-      Count(pose.sequence_number == client->pending.sequence_number ? PoseVerdict::kDuplicate
-                                                                    : PoseVerdict::kOutOfOrder, id);
+    if (const hapco_idl_DevicePose* last = client->last_queued(); last != nullptr && pose.sequence_number <= last->sequence_number) {
+      Count(pose.sequence_number == last->sequence_number ? PoseVerdict::kDuplicate : PoseVerdict::kOutOfOrder, id);
       continue;
     }
     const PoseVerdict verdict = client->session->Check(pose, receive_ns, options_.limits);
@@ -331,36 +329,51 @@ void ServerLoop::ProcessPoses() {
       client->session->NotifyIgnored(pose, receive_ns, verdict);  // the client is told why
       continue;
     }
-    if (client->has_pending) ++counters_.superseded;
-    client->pending = pose;
-    client->pending_receive_ns = receive_ns;
-    client->has_pending = true;
+    if (client->num_queued == kMaxQueuedPoses) {
+      // More than a burst: the oldest gives way (it is the most out of date).
+      ++counters_.superseded;
+      std::move(client->queued.begin() + 1, client->queued.end(), client->queued.begin());
+      std::move(client->queued_receive_ns.begin() + 1, client->queued_receive_ns.end(), client->queued_receive_ns.begin());
+      --client->num_queued;
+    }
+    client->queued[static_cast<std::size_t>(client->num_queued)] = pose;
+    client->queued_receive_ns[static_cast<std::size_t>(client->num_queued)] = receive_ns;
+    ++client->num_queued;
   }
-  // Step every session that got a pose, on the pool; each job touches only its own session
-  // (its TwoBodySession, its writers) and its own slot of step_ns_.
+  // Step every session that got poses, on the pool, each of its poses in order; each job
+  // touches only its own session (its TwoBodySession, its writers) and its own Client slots.
   stepping_.clear();
   for (auto& [id, client] : sessions_) {
-    if (!client.has_pending) continue;
-    client.has_pending = false;
+    if (client.num_queued == 0) continue;
     stepping_.push_back(&client);
   }
-  auto step = [this](int k) {
-    Client& client = *stepping_[static_cast<std::size_t>(k)];
-    step_ns_[static_cast<std::size_t>(k)] = client.session->StepAndPublish(client.pending, client.pending_receive_ns);
+  auto step = [](Client& client) {
+    client.num_stepped = client.num_queued;
+    for (int k = 0; k < client.num_queued; ++k) {
+      const auto slot = static_cast<std::size_t>(k);
+      client.step_ns[slot] = client.session->StepAndPublish(client.queued[slot], client.queued_receive_ns[slot]);
+      client.sent_force_n[slot] = client.session->last_force_n();
+    }
+    client.num_queued = 0;
   };
-  pool_.Run(static_cast<int>(stepping_.size()), step);
+  auto job = [&](int k) { step(*stepping_[static_cast<std::size_t>(k)]); };
+  pool_.Run(static_cast<int>(stepping_.size()), job);
   if (stepping_.size() >= 2) ++counters_.parallel_batches;
-  for (std::size_t k = 0; k < stepping_.size(); ++k) {
-    const Client& client = *stepping_[k];
-    const int64_t ns = step_ns_[k];
+  for (const Client* stepped : stepping_) {
+    const Client& client = *stepped;
     const std::string& id = client.session->client_id();
-    step_times_us_.push_back(static_cast<double>(ns) * 1e-3);
-    if (options_.trace != nullptr) {
-      const auto& p = client.pending.position_m;
-      const Eigen::Vector3d& f = client.session->last_force_n();
-      std::fprintf(options_.trace, "%s,%llu,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%.3f\n", id.c_str(),
-                   static_cast<unsigned long long>(client.pending.sequence_number), p.x, p.y, p.z,
-                   f.x(), f.y(), f.z(), static_cast<double>(ns) * 1e-3);
+    for (int k = 0; k < client.num_stepped; ++k) {
+      const auto slot = static_cast<std::size_t>(k);
+      const int64_t ns = client.step_ns[slot];
+      step_times_us_.push_back(static_cast<double>(ns) * 1e-3);
+      if (k > 0) ++counters_.burst_steps;
+      if (options_.trace != nullptr) {
+        const auto& p = client.queued[slot].position_m;
+        const Eigen::Vector3d& f = client.sent_force_n[slot];
+        std::fprintf(options_.trace, "%s,%llu,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%.3f\n", id.c_str(),
+                     static_cast<unsigned long long>(client.queued[slot].sequence_number), p.x, p.y, p.z, f.x(),
+                     f.y(), f.z(), static_cast<double>(ns) * 1e-3);
+      }
     }
     if (client.session->counters().non_finite_forces > 0 &&
         client.session->last_output().device_force_n.allFinite() == false) {
@@ -425,7 +438,7 @@ std::string ServerLoop::Summary() const {
   char line[768];
   std::snprintf(line, sizeof(line),
                 "hapco-server: %llu steps (%llu ticks stepped several sessions on %d threads), "
-                "%llu sessions opened, %zu open; superseded %llu, "
+                "%llu sessions opened, %zu open; superseded %llu, stepped in bursts %llu, "
                 "sequence gaps %llu; "
                 "bad input: nan %llu, workspace %llu, jumps %llu, out-of-order %llu, duplicates %llu, "
                 "unknown clients %llu, floods %llu, identity mismatches %llu; non-finite forces %llu, force write errors %llu, "
@@ -433,7 +446,7 @@ std::string ServerLoop::Summary() const {
                 static_cast<unsigned long long>(c.steps), static_cast<unsigned long long>(c.parallel_batches),
                 pool_.threads(), static_cast<unsigned long long>(c.sessions_opened),
                 sessions_.size(), static_cast<unsigned long long>(c.superseded),
-                static_cast<unsigned long long>(c.sequence_gaps),
+                static_cast<unsigned long long>(c.burst_steps), static_cast<unsigned long long>(c.sequence_gaps),
                 static_cast<unsigned long long>(in.bad_pose_nan), static_cast<unsigned long long>(in.out_of_workspace),
                 static_cast<unsigned long long>(in.position_jumps), static_cast<unsigned long long>(in.out_of_order),
                 static_cast<unsigned long long>(in.duplicates), static_cast<unsigned long long>(in.unknown_clients),

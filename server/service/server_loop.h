@@ -7,6 +7,7 @@
 // DDS listener (platform-notes.md: no entity creation inside a listener).
 // Bad input is counted, logged at most once per second per kind, and never fatal.
 #include <atomic>
+#include <array>
 #include <cstdint>
 #include <cstdio>
 #include <map>
@@ -62,6 +63,7 @@ struct ServerCounters {
   uint64_t poses_after_leave = 0;   // poses of a client that left, ignored until it joins again
   uint64_t poses_before_open = 0;   // poses of a session still waiting for the recorders (Session::TryOpen)
   uint64_t parallel_batches = 0;    // ticks that stepped two or more sessions on the pool
+  uint64_t burst_steps = 0;         // poses stepped after another of the same client in one tick
 };
 
 class ServerLoop {
@@ -88,11 +90,21 @@ class ServerLoop {
   std::string Summary() const;
 
  private:
+  // Poses of one client taken in one loop iteration, stepped in order (a burst from a jittery
+  // network, or poses that arrived while the server was busy): each gets its own step and
+  // force, and the friction path sees every pose. Beyond this many (the pose reader's history
+  // per client) the oldest is superseded.
+  static constexpr int kMaxQueuedPoses = 4;
   struct Client {
     std::unique_ptr<Session> session;
-    hapco_idl_DevicePose pending{};
-    int64_t pending_receive_ns = 0;
-    bool has_pending = false;
+    std::array<hapco_idl_DevicePose, kMaxQueuedPoses> queued{};
+    std::array<int64_t, kMaxQueuedPoses> queued_receive_ns{};
+    int num_queued = 0;
+    // Filled by the stepping job, read by the server thread after the batch.
+    std::array<int64_t, kMaxQueuedPoses> step_ns{};
+    std::array<Eigen::Vector3d, kMaxQueuedPoses> sent_force_n{};
+    int num_stepped = 0;
+    const hapco_idl_DevicePose* last_queued() const { return num_queued > 0 ? &queued[num_queued - 1] : nullptr; }
   };
   void ProcessSessionControls();
   void ProcessPoses();
@@ -142,7 +154,6 @@ class ServerLoop {
   std::vector<double> step_times_us_;  // this status period
   WorkPool pool_;
   std::vector<Client*> stepping_;   // the sessions stepped in this batch (capacity max_sessions)
-  std::vector<int64_t> step_ns_;    // their step+publish times, ns
   int64_t start_ns_ = 0;
   int64_t last_status_ns_ = 0, last_status_cpu_ns_ = 0;  // for ServerStatus.cpu_use
   std::vector<int64_t> last_log_ns_;
