@@ -89,30 +89,57 @@ void PhantomClient::OnForcesAvailable() {
   hapco_idl_FeedbackForce force{};
   while (dds_->force_reader.Take(&force)) {
     const int64_t now = MonotonicNowNs();
+    // Answers to earlier poses that never arrived on their own (a best-effort reader drops a
+    // sample that comes after a newer one): recovered from the answers this one repeats,
+    // oldest first, before it. Stepped forces only; a notice repeats nothing.
+    if (force.pose_verdict == hapco_idl_POSE_STEPPED) {
+      const uint32_t count = std::min<uint32_t>(force.recent_count, hapco_idl_RECENT_SAMPLES);
+      for (uint32_t k = count; k-- > 0;) {
+        const hapco_idl_RecentAnswer& a = force.recent[k];
+        if (a.pose_sequence <= newest_arrival_sequence_ || a.pose_sequence >= force.pose_sequence) continue;
+        PushArrival(a.pose_sequence, a.client_time_ns, now, -1,
+                    Eigen::Vector3d(a.force_n.x, a.force_n.y, a.force_n.z), nullptr, true);
+      }
+    }
+    PushArrival(force.pose_sequence, force.client_time_ns, now, force.server_send_ns - force.server_receive_ns,
+                Eigen::Vector3d(force.force_n.x, force.force_n.y, force.force_n.z), &force, false);
+  }
+}
+
+void PhantomClient::PushArrival(uint64_t pose_sequence, int64_t client_time_ns, int64_t now_ns, int64_t server_time_ns,
+                                const Eigen::Vector3d& force_n, const ::hapco_idl_FeedbackForce* sample, bool recovered) {
+  {
+    const int64_t now = now_ns;
     const uint32_t head = arrivals_head_.load(std::memory_order_relaxed);
     if (head - arrivals_tail_.load(std::memory_order_acquire) >= kArrivalCapacity) {
       arrivals_overflowed_.fetch_add(1, std::memory_order_relaxed);
-      continue;
+      return;
     }
     ReceivedForce& r = arrivals_[head % kArrivalCapacity];
-    r.pose_sequence = force.pose_sequence;
-    r.client_time_ns = force.client_time_ns;
+    r = ReceivedForce{};
+    r.pose_sequence = pose_sequence;
+    r.client_time_ns = client_time_ns;
     r.arrival_ns = now;
-    r.server_time_ns = force.server_send_ns - force.server_receive_ns;
-    r.force_n = Eigen::Vector3d(force.force_n.x, force.force_n.y, force.force_n.z);
-    r.separating = force.separating_count;
-    r.sticking = force.sticking_count;
-    r.sliding = force.sliding_count;
-    r.verdict = FromIdl(force.pose_verdict);
-    r.server_ignored_poses = force.ignored_poses;
-    const hapco_idl_LocalContactModel& m = force.model;
-    r.model.valid = m.valid;
-    r.model.position_m = Eigen::Vector3d(m.position_m.x, m.position_m.y, m.position_m.z);
-    for (int i = 0; i < 3; ++i) {
-      for (int j = 0; j < 3; ++j) r.model.stiffness_n_per_m(i, j) = m.stiffness_n_per_m[3 * i + j];
+    r.server_time_ns = server_time_ns;
+    r.force_n = force_n;
+    r.recovered = recovered;
+    if (sample != nullptr) {
+      const hapco_idl_FeedbackForce& force = *sample;
+      r.separating = force.separating_count;
+      r.sticking = force.sticking_count;
+      r.sliding = force.sliding_count;
+      r.verdict = FromIdl(force.pose_verdict);
+      r.server_ignored_poses = force.ignored_poses;
+      const hapco_idl_LocalContactModel& m = force.model;
+      r.model.valid = m.valid;
+      r.model.position_m = Eigen::Vector3d(m.position_m.x, m.position_m.y, m.position_m.z);
+      for (int i = 0; i < 3; ++i) {
+        for (int j = 0; j < 3; ++j) r.model.stiffness_n_per_m(i, j) = m.stiffness_n_per_m[3 * i + j];
+      }
+      r.model.normal = Eigen::Vector3d(m.normal.x, m.normal.y, m.normal.z);
+      r.model.friction_coefficient = m.friction_coefficient;
     }
-    r.model.normal = Eigen::Vector3d(m.normal.x, m.normal.y, m.normal.z);
-    r.model.friction_coefficient = m.friction_coefficient;
+    if (r.verdict == ServerVerdict::kStepped) newest_arrival_sequence_ = std::max(newest_arrival_sequence_, pose_sequence);
     arrivals_head_.store(head + 1, std::memory_order_release);
   }
 }
@@ -185,6 +212,7 @@ void PhantomClient::Run(const std::atomic<bool>& stop, const std::function<void(
   service::SetClientId(pose.client_id, config_.client_id);
   pose.orientation = {1.0, 0.0, 0.0, 0.0};
   pose.reported_round_trip_ns = -1;
+  pose.recent_count = 0;  // the poses sent before, newest first (a server that missed one steps it)
 
   std::vector<ReceivedForce> taken;
   taken.reserve(kArrivalCapacity);
@@ -241,6 +269,10 @@ void PhantomClient::Run(const std::atomic<bool>& stop, const std::function<void(
       } else {
         ++stats_.pose_write_errors;
       }
+      // This pose becomes the newest of the next one's recent list.
+      std::move_backward(pose.recent, pose.recent + hapco_idl_RECENT_SAMPLES - 1, pose.recent + hapco_idl_RECENT_SAMPLES);
+      pose.recent[0] = {pose.sequence_number, pose.client_time_ns, pose.position_m};
+      pose.recent_count = std::min<uint32_t>(pose.recent_count + 1, hapco_idl_RECENT_SAMPLES);
     }
     previous_position = position;
 
@@ -275,13 +307,14 @@ void PhantomClient::Run(const std::atomic<bool>& stop, const std::function<void(
       if (!any_force) stats_.first_force_arrival_ns = r.arrival_ns;
       any_force = true;
       ++stats_.forces_received;
+      if (r.recovered) ++stats_.answers_recovered;
       fresh = true;
       last_force_sequence = r.pose_sequence;
       raw = r.force_n;
       model = r.model;
       stats_.round_trip_us.push_back(r.round_trip_us());
       stats_.render_latency_us.push_back(static_cast<double>(now - r.client_time_ns) * 1e-3);
-      stats_.server_time_us.push_back(static_cast<double>(r.server_time_ns) * 1e-3);
+      if (!r.recovered) stats_.server_time_us.push_back(static_cast<double>(r.server_time_ns) * 1e-3);
       pose.reported_round_trip_ns = r.arrival_ns - r.client_time_ns;
       taken.push_back(r);
     }

@@ -25,6 +25,8 @@
 #include "phantom.h"
 #include "service/security.h"
 
+struct hapco_idl_FeedbackForce;  // idl/hapco_types.idl (the DDS types stay out of this header)
+
 namespace hapco::phantom {
 
 enum class DriveMode {
@@ -66,6 +68,9 @@ struct ReceivedForce {
   ServerVerdict verdict = ServerVerdict::kStepped;
   uint64_t server_ignored_poses = 0;  // the server's count of this session's ignored poses
   ReceivedModel model;                // FeedbackForce.model (valid with a stepped force in contact)
+  // An answer recovered from a later force's repeated answers (FeedbackForce.recent): its own
+  // sample never arrived (dropped for coming after a newer one). No model, no server time.
+  bool recovered = false;
   double round_trip_us() const { return static_cast<double>(arrival_ns - client_time_ns) * 1e-3; }
 };
 
@@ -89,6 +94,7 @@ struct ClientStats {
   int ticks_run = 0;
   uint64_t poses_published = 0, pose_write_errors = 0;
   uint64_t forces_received = 0;     // in order, new sequence
+  uint64_t answers_recovered = 0;   // of which recovered from a later force's repeated answers
   uint64_t forces_reordered = 0;    // older than one already taken: logged, not rendered
   uint64_t arrivals_overflowed = 0; // arrival queue full (tick thread stalled): dropped
   uint64_t missed_ticks = 0;        // servo deadlines that passed without a tick
@@ -139,6 +145,11 @@ class PhantomClient {
  private:
   struct Dds;  // the DDS entities (service/dds.h stays out of this header)
   void OnForcesAvailable();  // Cyclone's receive thread
+  // Appends one arrival to the queue (receive thread); sample: the FeedbackForce it came in as
+  // (nullptr for a recovered answer).
+  void PushArrival(uint64_t pose_sequence, int64_t client_time_ns, int64_t now_ns, int64_t server_time_ns,
+                   const Eigen::Vector3d& force_n, const ::hapco_idl_FeedbackForce* sample, bool recovered);
+  uint64_t newest_arrival_sequence_ = 0;  // receive thread only
 
   // Single-producer (receive thread) single-consumer (tick thread) queue of arrivals.
   static constexpr uint32_t kArrivalCapacity = 256;

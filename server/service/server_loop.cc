@@ -36,9 +36,9 @@ ServerLoop::ServerLoop(std::vector<const sim::TwoBodyModel*> models, dds_domaini
       contact_topic_(participant_),
       client_subscriber_(participant_, kAllClientsPartition),
       publisher_(participant_),
-      // Reader history 4 per client (the writers keep 1): poses that arrive while the server
-      // is busy are taken and counted as superseded instead of vanishing in the reader.
-      pose_reader_(client_subscriber_, pose_topic_, PoseQos().KeepLast(4)),
+      // Reader history kMaxQueuedPoses per client (the writers keep 1): poses that arrive
+      // while the server is busy are taken and stepped in order (StepQueued).
+      pose_reader_(client_subscriber_, pose_topic_, PoseQos().KeepLast(kMaxQueuedPoses)),
       session_reader_(client_subscriber_, session_topic_),
       status_writer_(publisher_, status_topic_),
       recorder_probe_publisher_(participant_, ClientPartition(".recorder-probe")),
@@ -329,6 +329,42 @@ void ServerLoop::ProcessPoses() {
       client->session->NotifyIgnored(pose, receive_ns, verdict);  // the client is told why
       continue;
     }
+    RecoverMissedPoses(client, pose, receive_ns);
+    Queue(client, pose, receive_ns);
+  }
+  StepQueued();
+}
+
+void ServerLoop::RecoverMissedPoses(Client* client, const hapco_idl_DevicePose& pose, int64_t receive_ns) {
+  // The poses this one repeats that the server never took (a best-effort reader drops a
+  // sample that arrives after a newer one; jitter reorders packets), oldest first, each
+  // checked like a pose of its own.
+  const hapco_idl_DevicePose* last = client->last_queued();
+  uint64_t newest_known = last != nullptr ? last->sequence_number : client->session->last_sequence();
+  const bool started = last != nullptr || client->session->last_sequence() > 0;
+  const uint32_t count = std::min<uint32_t>(pose.recent_count, hapco_idl_RECENT_SAMPLES);
+  for (uint32_t k = count; k-- > 0;) {
+    const hapco_idl_RecentPose& recent = pose.recent[k];
+    if (!started || recent.sequence_number <= newest_known || recent.sequence_number >= pose.sequence_number) continue;
+    hapco_idl_DevicePose missed = pose;
+    missed.sequence_number = recent.sequence_number;
+    missed.client_time_ns = recent.client_time_ns;
+    missed.position_m = recent.position_m;
+    missed.recent_count = 0;
+    // Checked (and counted against the flood limit) like a pose of its own.
+    const PoseVerdict verdict = client->session->Check(missed, receive_ns, options_.limits);
+    if (verdict != PoseVerdict::kAccept) {
+      Count(verdict, client->session->client_id());
+      continue;
+    }
+    Queue(client, missed, receive_ns);
+    ++counters_.recovered_poses;
+    newest_known = recent.sequence_number;
+  }
+}
+
+void ServerLoop::Queue(Client* client, const hapco_idl_DevicePose& pose, int64_t receive_ns) {
+  {
     if (client->num_queued == kMaxQueuedPoses) {
       // More than a burst: the oldest gives way (it is the most out of date).
       ++counters_.superseded;
@@ -340,6 +376,9 @@ void ServerLoop::ProcessPoses() {
     client->queued_receive_ns[static_cast<std::size_t>(client->num_queued)] = receive_ns;
     ++client->num_queued;
   }
+}
+
+void ServerLoop::StepQueued() {
   // Step every session that got poses, on the pool, each of its poses in order; each job
   // touches only its own session (its TwoBodySession, its writers) and its own Client slots.
   stepping_.clear();
@@ -438,7 +477,7 @@ std::string ServerLoop::Summary() const {
   char line[768];
   std::snprintf(line, sizeof(line),
                 "hapco-server: %llu steps (%llu ticks stepped several sessions on %d threads), "
-                "%llu sessions opened, %zu open; superseded %llu, stepped in bursts %llu, "
+                "%llu sessions opened, %zu open; superseded %llu, stepped in bursts %llu, recovered %llu, "
                 "sequence gaps %llu; "
                 "bad input: nan %llu, workspace %llu, jumps %llu, out-of-order %llu, duplicates %llu, "
                 "unknown clients %llu, floods %llu, identity mismatches %llu; non-finite forces %llu, force write errors %llu, "
@@ -446,7 +485,8 @@ std::string ServerLoop::Summary() const {
                 static_cast<unsigned long long>(c.steps), static_cast<unsigned long long>(c.parallel_batches),
                 pool_.threads(), static_cast<unsigned long long>(c.sessions_opened),
                 sessions_.size(), static_cast<unsigned long long>(c.superseded),
-                static_cast<unsigned long long>(c.burst_steps), static_cast<unsigned long long>(c.sequence_gaps),
+                static_cast<unsigned long long>(c.burst_steps), static_cast<unsigned long long>(c.recovered_poses),
+                static_cast<unsigned long long>(c.sequence_gaps),
                 static_cast<unsigned long long>(in.bad_pose_nan), static_cast<unsigned long long>(in.out_of_workspace),
                 static_cast<unsigned long long>(in.position_jumps), static_cast<unsigned long long>(in.out_of_order),
                 static_cast<unsigned long long>(in.duplicates), static_cast<unsigned long long>(in.unknown_clients),

@@ -64,6 +64,7 @@ struct ServerCounters {
   uint64_t poses_before_open = 0;   // poses of a session still waiting for the recorders (Session::TryOpen)
   uint64_t parallel_batches = 0;    // ticks that stepped two or more sessions on the pool
   uint64_t burst_steps = 0;         // poses stepped after another of the same client in one tick
+  uint64_t recovered_poses = 0;     // poses never received, stepped from a later pose's repeats
 };
 
 class ServerLoop {
@@ -94,7 +95,7 @@ class ServerLoop {
   // network, or poses that arrived while the server was busy): each gets its own step and
   // force, and the friction path sees every pose. Beyond this many (the pose reader's history
   // per client) the oldest is superseded.
-  static constexpr int kMaxQueuedPoses = 4;
+  static constexpr int kMaxQueuedPoses = 16;
   struct Client {
     std::unique_ptr<Session> session;
     std::array<hapco_idl_DevicePose, kMaxQueuedPoses> queued{};
@@ -108,6 +109,10 @@ class ServerLoop {
   };
   void ProcessSessionControls();
   void ProcessPoses();
+  // Queues the poses `pose` repeats (DevicePose.recent) that this client's session never got.
+  void RecoverMissedPoses(Client* client, const hapco_idl_DevicePose& pose, int64_t receive_ns);
+  void Queue(Client* client, const hapco_idl_DevicePose& pose, int64_t receive_ns);
+  void StepQueued();  // steps the queued poses of every session, on the pool
   void PublishStatus(int64_t now_ns);
   // Opens the sessions whose recorders are ready (Session::TryOpen); true if any still waits.
   bool OpenWaitingSessions(int64_t now_ns);

@@ -90,6 +90,10 @@ int64_t Session::StepAndPublish(const hapco_idl_DevicePose& pose, int64_t receiv
   FillLocalModel(force_finite);
   force_.server_send_ns = MonotonicNowNs();
   if (force_writer_->Write(force_) != DDS_RETCODE_OK) ++counters_.force_write_errors;
+  // This answer becomes the newest of the next force's repeated answers.
+  std::move_backward(force_.recent, force_.recent + hapco_idl_RECENT_SAMPLES - 1, force_.recent + hapco_idl_RECENT_SAMPLES);
+  force_.recent[0] = {force_.pose_sequence, force_.client_time_ns, force_.force_n};
+  force_.recent_count = std::min<uint32_t>(force_.recent_count + 1, hapco_idl_RECENT_SAMPLES);
   // The contact frame goes after the force: the force is the latency-critical sample.
   FillContactFrame(pose.sequence_number);
   frame_->server_receive_ns = receive_ns;
@@ -130,6 +134,7 @@ void Session::NotifyIgnored(const hapco_idl_DevicePose& pose, int64_t receive_ns
   notice.server_receive_ns = receive_ns;
   notice.pose_verdict = idl_verdict;
   notice.model.valid = false;  // a notice is no new force, and carries no model
+  notice.recent_count = 0;
   notice.ignored_poses = counters_.ignored_poses;
   notice.server_send_ns = MonotonicNowNs();
   if (!open()) return;
@@ -196,6 +201,7 @@ void Session::Reset() {
   stream_.Reset();
   last_good_force_n_.setZero();
   any_notice_ = false;
+  force_.recent_count = 0;  // answers of the previous stream are not this one's
 }
 
 }  // namespace hapco::service
