@@ -31,6 +31,7 @@ PHASES = [  # (name, seconds)
     ("approach", 0.5), ("hold-press", 1.0), ("slide", 1.0), ("hold-slide", 1.0), ("lift", 0.3), ("rest", 0.2)]
 HOLDS = ("hold-press", "hold-slide")
 MODES = ["direct", "direct+passivity", "local-model", "local-model+passivity"]
+FLOOR = "direct-repeat"  # direct again at round trip 0: the run-to-run floor of the force error
 
 
 def smooth(s):
@@ -117,7 +118,7 @@ def analyse(args):
     ref_deepest = min(z for _, z, _ in reference.values())
     out_rows = []
     for rt, loss, jitter, load, path in cases:
-        for mode in MODES:
+        for mode in MODES + [FLOOR]:
             ticks_path = os.path.join(path, mode, "ticks-nh-1.csv")
             summary_path = os.path.join(path, mode, "summary.csv")
             if not (os.path.isfile(ticks_path) and os.path.isfile(summary_path)):

@@ -38,7 +38,7 @@ sim::PoseVerdict CheckStatelessPose(const hapco_idl_DevicePose& pose, const sim:
 }
 
 sim::PoseVerdict PoseStream::Check(const hapco_idl_DevicePose& pose, std::int64_t receive_ns,
-                                   const sim::PoseLimits& limits) {
+                                   const sim::PoseLimits& limits, const hapco_idl_DevicePose* pending) {
   if (flood_tokens_ < 0) {
     flood_tokens_ = limits.flood_burst;
   } else {
@@ -49,6 +49,10 @@ sim::PoseVerdict PoseStream::Check(const hapco_idl_DevicePose& pose, std::int64_
   if (flood_tokens_ < 1.0) return sim::PoseVerdict::kFlood;
   flood_tokens_ -= 1.0;
   if (!FiniteOrientation(pose)) return sim::PoseVerdict::kNonFinite;
+  if (pending != nullptr) {
+    return sim::CheckPose(PositionOf(pose), pose.sequence_number,
+                          sim::AcceptedPose{pending->sequence_number, PositionOf(*pending)}, limits);
+  }
   return sim::CheckPose(PositionOf(pose), pose.sequence_number, last_, limits);
 }
 
@@ -60,5 +64,38 @@ std::uint64_t PoseStream::Accept(const hapco_idl_DevicePose& pose) {
 }
 
 void PoseStream::Reset() { last_.reset(); }
+
+bool PendingPoses::Push(const hapco_idl_DevicePose& pose, std::int64_t receive_ns) {
+  bool superseded = false;
+  if (size_ == kCapacity) {
+    std::move(poses_.begin() + 1, poses_.end(), poses_.begin());
+    std::move(receive_ns_.begin() + 1, receive_ns_.end(), receive_ns_.begin());
+    --size_;
+    superseded = true;
+  }
+  poses_[static_cast<std::size_t>(size_)] = pose;
+  receive_ns_[static_cast<std::size_t>(size_)] = receive_ns;
+  ++size_;
+  return superseded;
+}
+
+int MissedPoses(const hapco_idl_DevicePose& pose, std::uint64_t newest_known, bool started,
+                std::array<hapco_idl_DevicePose, hapco_idl_RECENT_SAMPLES>* out) {
+  if (!started) return 0;
+  int written = 0;
+  const std::uint32_t count = std::min<std::uint32_t>(pose.recent_count, hapco_idl_RECENT_SAMPLES);
+  for (std::uint32_t k = count; k-- > 0;) {  // oldest first
+    const hapco_idl_RecentPose& recent = pose.recent[k];
+    if (recent.sequence_number <= newest_known || recent.sequence_number >= pose.sequence_number) continue;
+    hapco_idl_DevicePose& missed = (*out)[static_cast<std::size_t>(written++)];
+    missed = pose;
+    missed.sequence_number = recent.sequence_number;
+    missed.client_time_ns = recent.client_time_ns;
+    missed.position_m = recent.position_m;
+    missed.recent_count = 0;
+    newest_known = recent.sequence_number;  // repeats out of order are skipped, not reordered
+  }
+  return written;
+}
 
 }  // namespace hapco::service

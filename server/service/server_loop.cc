@@ -244,7 +244,9 @@ void ServerLoop::ProcessSessionControls() {
         } else {
           // A restarted client (its sequence starts again): a fresh stream and scene state.
           it->second.session->Reset();
-          it->second.num_queued = 0;
+          it->second.queued.Clear();
+          it->second.newest_seen = 0;
+          it->second.seen_any = false;
           Log(kLogSession, "session of '" + id + "' joined again: reset");
         }
         break;
@@ -261,7 +263,9 @@ void ServerLoop::ProcessSessionControls() {
       case hapco_idl_SESSION_RESET:
         if (it != sessions_.end()) {
           it->second.session->Reset();
-          it->second.num_queued = 0;
+          it->second.queued.Clear();
+          it->second.newest_seen = 0;
+          it->second.seen_any = false;
         }
         break;
       default:
@@ -319,17 +323,21 @@ void ServerLoop::ProcessPoses() {
       ++counters_.poses_before_open;  // the session waits for its recorders (Session::TryOpen)
       continue;
     }
-    if (const hapco_idl_DevicePose* last = client->last_queued(); last != nullptr && pose.sequence_number <= last->sequence_number) {
+    if (const hapco_idl_DevicePose* last = client->queued.last(); last != nullptr && pose.sequence_number <= last->sequence_number) {
       Count(pose.sequence_number == last->sequence_number ? PoseVerdict::kDuplicate : PoseVerdict::kOutOfOrder, id);
       continue;
     }
-    const PoseVerdict verdict = client->session->Check(pose, receive_ns, options_.limits);
+    // The poses it repeats that never arrived go first (each checked on its own), then the
+    // pose itself, checked against the newest of them: a burst is checked pose to pose.
+    RecoverMissedPoses(client, pose, receive_ns);
+    client->newest_seen = std::max(client->newest_seen, pose.sequence_number);
+    client->seen_any = true;
+    const PoseVerdict verdict = client->session->Check(pose, receive_ns, options_.limits, client->queued.last());
     if (verdict != PoseVerdict::kAccept) {
       Count(verdict, id);
       client->session->NotifyIgnored(pose, receive_ns, verdict);  // the client is told why
       continue;
     }
-    RecoverMissedPoses(client, pose, receive_ns);
     Queue(client, pose, receive_ns);
   }
   StepQueued();
@@ -338,44 +346,22 @@ void ServerLoop::ProcessPoses() {
 void ServerLoop::RecoverMissedPoses(Client* client, const hapco_idl_DevicePose& pose, int64_t receive_ns) {
   // The poses this one repeats that the server never took (a best-effort reader drops a
   // sample that arrives after a newer one; jitter reorders packets), oldest first, each
-  // checked like a pose of its own.
-  const hapco_idl_DevicePose* last = client->last_queued();
-  uint64_t newest_known = last != nullptr ? last->sequence_number : client->session->last_sequence();
-  const bool started = last != nullptr || client->session->last_sequence() > 0;
-  const uint32_t count = std::min<uint32_t>(pose.recent_count, hapco_idl_RECENT_SAMPLES);
-  for (uint32_t k = count; k-- > 0;) {
-    const hapco_idl_RecentPose& recent = pose.recent[k];
-    if (!started || recent.sequence_number <= newest_known || recent.sequence_number >= pose.sequence_number) continue;
-    hapco_idl_DevicePose missed = pose;
-    missed.sequence_number = recent.sequence_number;
-    missed.client_time_ns = recent.client_time_ns;
-    missed.position_m = recent.position_m;
-    missed.recent_count = 0;
-    // Checked (and counted against the flood limit) like a pose of its own.
-    const PoseVerdict verdict = client->session->Check(missed, receive_ns, options_.limits);
+  // checked (and counted against the flood limit) like a pose of its own.
+  const int count = MissedPoses(pose, client->newest_seen, client->seen_any, &missed_);
+  for (int k = 0; k < count; ++k) {
+    const hapco_idl_DevicePose& missed = missed_[static_cast<std::size_t>(k)];
+    const PoseVerdict verdict = client->session->Check(missed, receive_ns, options_.limits, client->queued.last());
     if (verdict != PoseVerdict::kAccept) {
       Count(verdict, client->session->client_id());
       continue;
     }
     Queue(client, missed, receive_ns);
     ++counters_.recovered_poses;
-    newest_known = recent.sequence_number;
   }
 }
 
 void ServerLoop::Queue(Client* client, const hapco_idl_DevicePose& pose, int64_t receive_ns) {
-  {
-    if (client->num_queued == kMaxQueuedPoses) {
-      // More than a burst: the oldest gives way (it is the most out of date).
-      ++counters_.superseded;
-      std::move(client->queued.begin() + 1, client->queued.end(), client->queued.begin());
-      std::move(client->queued_receive_ns.begin() + 1, client->queued_receive_ns.end(), client->queued_receive_ns.begin());
-      --client->num_queued;
-    }
-    client->queued[static_cast<std::size_t>(client->num_queued)] = pose;
-    client->queued_receive_ns[static_cast<std::size_t>(client->num_queued)] = receive_ns;
-    ++client->num_queued;
-  }
+  if (client->queued.Push(pose, receive_ns)) ++counters_.superseded;  // more than a burst: the oldest gave way
 }
 
 void ServerLoop::StepQueued() {
@@ -383,17 +369,17 @@ void ServerLoop::StepQueued() {
   // touches only its own session (its TwoBodySession, its writers) and its own Client slots.
   stepping_.clear();
   for (auto& [id, client] : sessions_) {
-    if (client.num_queued == 0) continue;
+    if (client.queued.size() == 0) continue;
     stepping_.push_back(&client);
   }
   auto step = [](Client& client) {
-    client.num_stepped = client.num_queued;
-    for (int k = 0; k < client.num_queued; ++k) {
+    client.stepped = client.queued;
+    client.queued.Clear();
+    for (int k = 0; k < client.stepped.size(); ++k) {
       const auto slot = static_cast<std::size_t>(k);
-      client.step_ns[slot] = client.session->StepAndPublish(client.queued[slot], client.queued_receive_ns[slot]);
+      client.step_ns[slot] = client.session->StepAndPublish(client.stepped.pose(k), client.stepped.receive_ns(k));
       client.sent_force_n[slot] = client.session->last_force_n();
     }
-    client.num_queued = 0;
   };
   auto job = [&](int k) { step(*stepping_[static_cast<std::size_t>(k)]); };
   pool_.Run(static_cast<int>(stepping_.size()), job);
@@ -401,17 +387,18 @@ void ServerLoop::StepQueued() {
   for (const Client* stepped : stepping_) {
     const Client& client = *stepped;
     const std::string& id = client.session->client_id();
-    for (int k = 0; k < client.num_stepped; ++k) {
+    for (int k = 0; k < client.stepped.size(); ++k) {
       const auto slot = static_cast<std::size_t>(k);
       const int64_t ns = client.step_ns[slot];
       step_times_us_.push_back(static_cast<double>(ns) * 1e-3);
       if (k > 0) ++counters_.burst_steps;
       if (options_.trace != nullptr) {
-        const auto& p = client.queued[slot].position_m;
+        const hapco_idl_DevicePose& pose = client.stepped.pose(k);
+        const auto& p = pose.position_m;
         const Eigen::Vector3d& f = client.sent_force_n[slot];
         std::fprintf(options_.trace, "%s,%llu,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%.3f\n", id.c_str(),
-                     static_cast<unsigned long long>(client.queued[slot].sequence_number), p.x, p.y, p.z, f.x(),
-                     f.y(), f.z(), static_cast<double>(ns) * 1e-3);
+                     static_cast<unsigned long long>(pose.sequence_number), p.x, p.y, p.z, f.x(), f.y(), f.z(),
+                     static_cast<double>(ns) * 1e-3);
       }
     }
     if (client.session->counters().non_finite_forces > 0 &&

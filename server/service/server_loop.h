@@ -91,22 +91,20 @@ class ServerLoop {
   std::string Summary() const;
 
  private:
-  // Poses of one client taken in one loop iteration, stepped in order (a burst from a jittery
-  // network, or poses that arrived while the server was busy): each gets its own step and
-  // force, and the friction path sees every pose. Beyond this many (the pose reader's history
-  // per client) the oldest is superseded.
-  static constexpr int kMaxQueuedPoses = 16;
+  static constexpr int kMaxQueuedPoses = PendingPoses::kCapacity;
   struct Client {
     std::unique_ptr<Session> session;
-    std::array<hapco_idl_DevicePose, kMaxQueuedPoses> queued{};
-    std::array<int64_t, kMaxQueuedPoses> queued_receive_ns{};
-    int num_queued = 0;
+    PendingPoses queued;  // stepped in order by StepQueued (service/pose_intake.h)
+    // Newest sequence number this client's session has processed, stepped or refused: repeats
+    // (DevicePose.recent) at or before it are never looked at again.
+    uint64_t newest_seen = 0;
+    bool seen_any = false;
     // Filled by the stepping job, read by the server thread after the batch.
+    PendingPoses stepped;
     std::array<int64_t, kMaxQueuedPoses> step_ns{};
     std::array<Eigen::Vector3d, kMaxQueuedPoses> sent_force_n{};
-    int num_stepped = 0;
-    const hapco_idl_DevicePose* last_queued() const { return num_queued > 0 ? &queued[num_queued - 1] : nullptr; }
   };
+
   void ProcessSessionControls();
   void ProcessPoses();
   // Queues the poses `pose` repeats (DevicePose.recent) that this client's session never got.
@@ -159,6 +157,7 @@ class ServerLoop {
   std::vector<double> step_times_us_;  // this status period
   WorkPool pool_;
   std::vector<Client*> stepping_;   // the sessions stepped in this batch (capacity max_sessions)
+  std::array<hapco_idl_DevicePose, hapco_idl_RECENT_SAMPLES> missed_{};  // RecoverMissedPoses scratch
   int64_t start_ns_ = 0;
   int64_t last_status_ns_ = 0, last_status_cpu_ns_ = 0;  // for ServerStatus.cpu_use
   std::vector<int64_t> last_log_ns_;

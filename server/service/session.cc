@@ -55,9 +55,9 @@ bool Session::TryOpen(uint32_t recorders, int64_t now_ns) {
   return true;
 }
 
-PoseVerdict Session::Check(const hapco_idl_DevicePose& pose, int64_t receive_ns,
-                           const PoseLimits& limits) {
-  return stream_.Check(pose, receive_ns, limits);
+PoseVerdict Session::Check(const hapco_idl_DevicePose& pose, int64_t receive_ns, const PoseLimits& limits,
+                           const hapco_idl_DevicePose* pending) {
+  return stream_.Check(pose, receive_ns, limits, pending);
 }
 
 int64_t Session::StepAndPublish(const hapco_idl_DevicePose& pose, int64_t receive_ns) {

@@ -67,7 +67,10 @@ class Session {
 
   // Classifies a pose against the limits and this session's stream (no state change except
   // the flood window, which counts every pose seen). receive_ns: server CLOCK_MONOTONIC.
-  PoseVerdict Check(const hapco_idl_DevicePose& pose, int64_t receive_ns, const PoseLimits& limits);
+  // pending: the newest pose of this session waiting for its step (order and jump are checked
+  // against it), or nullptr.
+  PoseVerdict Check(const hapco_idl_DevicePose& pose, int64_t receive_ns, const PoseLimits& limits,
+                    const hapco_idl_DevicePose* pending = nullptr);
 
   // One haptic step for an accepted pose, then the force (and contact frame) is written.
   // Returns the step wall time in ns (solve + publish).

@@ -1,9 +1,12 @@
 // The server's handling of DevicePose and SessionControl samples from any participant, fed
 // with arbitrary field values through the functions the server loop calls (ProcessPoses /
 // ProcessSessionControls order): ClientIdOf, IsValidClientId, CheckStatelessPose for a pose
-// that would open a session, PoseStream::Check per session, Accept for the stepped pose.
-// Accepted poses must be finite, inside the workspace, in strictly increasing sequence order
-// and within the jump limit of the previous stepped pose.
+// that would open a session, PoseStream::Check per session, MissedPoses for the poses a pose
+// repeats (DevicePose.recent: arbitrary counts, sequences and positions), PendingPoses for
+// the poses waiting for a step, Accept for each stepped pose. Stepped poses must be finite,
+// inside the workspace, in strictly increasing sequence order and within the jump limit of
+// the previous stepped pose.
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -61,8 +64,9 @@ class Fields {
 
 struct Client {
   service::PoseStream stream;
-  bool has_pending = false;
-  hapco_idl_DevicePose pending{};
+  service::PendingPoses pending;
+  std::uint64_t newest_seen = 0;  // as ServerLoop::Client
+  bool seen_any = false;
 };
 
 }  // namespace
@@ -91,32 +95,37 @@ int PoseSession(const std::uint8_t* data, std::size_t size) {
           sessions.emplace(id, Client{});
         } else {
           it->second.stream.Reset();
-          it->second.has_pending = false;
+          it->second.pending.Clear();
+          it->second.newest_seen = 0;
+          it->second.seen_any = false;
         }
       } else if (command == 1 && it != sessions.end()) {  // LEAVE
         sessions.erase(it);
         left.insert(id);
       } else if (command == 2 && it != sessions.end()) {  // RESET
         it->second.stream.Reset();
-        it->second.has_pending = false;
+        it->second.pending.Clear();
+        it->second.newest_seen = 0;
+        it->second.seen_any = false;
       }
       continue;
     }
-    if (kind % 4 == 1) {  // a server tick: step every pending pose
+    if (kind % 4 == 1) {  // a server tick: step every pending pose, in order
       for (auto& [id, client] : sessions) {
-        if (!client.has_pending) continue;
-        client.has_pending = false;
-        const auto before = client.stream.last();
-        const hapco_idl_DevicePose& pose = client.pending;
-        const Eigen::Vector3d p(pose.position_m.x, pose.position_m.y, pose.position_m.z);
-        HAPCO_FUZZ_CHECK(p.allFinite(), "stepped a non-finite pose");
-        HAPCO_FUZZ_CHECK(p.norm() <= limits.workspace_m, "stepped a pose out of the workspace");
-        if (before) {
-          HAPCO_FUZZ_CHECK(pose.sequence_number > before->sequence, "stepped an old sequence");
-          const double gap = static_cast<double>(std::min<std::uint64_t>(pose.sequence_number - before->sequence, 10));
-          HAPCO_FUZZ_CHECK((p - before->position_m).norm() <= limits.max_jump_m * gap, "stepped a jump");
+        for (int k = 0; k < client.pending.size(); ++k) {
+          const auto before = client.stream.last();
+          const hapco_idl_DevicePose& pose = client.pending.pose(k);
+          const Eigen::Vector3d p(pose.position_m.x, pose.position_m.y, pose.position_m.z);
+          HAPCO_FUZZ_CHECK(p.allFinite(), "stepped a non-finite pose");
+          HAPCO_FUZZ_CHECK(p.norm() <= limits.workspace_m, "stepped a pose out of the workspace");
+          if (before) {
+            HAPCO_FUZZ_CHECK(pose.sequence_number > before->sequence, "stepped an old sequence");
+            const double gap = static_cast<double>(std::min<std::uint64_t>(pose.sequence_number - before->sequence, 10));
+            HAPCO_FUZZ_CHECK((p - before->position_m).norm() <= limits.max_jump_m * gap, "stepped a jump");
+          }
+          client.stream.Accept(pose);
         }
-        client.stream.Accept(pose);
+        client.pending.Clear();
       }
       continue;
     }
@@ -128,6 +137,14 @@ int PoseSession(const std::uint8_t* data, std::size_t size) {
     pose.orientation = {f.Double(), f.Double(), f.Double(), f.Double()};
     pose.buttons = static_cast<std::uint32_t>(f.U64());
     pose.reported_round_trip_ns = static_cast<std::int64_t>(f.U64());
+    // The repeats: any count (also beyond the array), sequences near the pose's or anywhere.
+    pose.recent_count = f.Byte() < 0xF0 ? f.Byte() % 16 : static_cast<std::uint32_t>(f.U64());
+    for (auto& recent : pose.recent) {
+      const std::uint8_t how = f.Byte();
+      recent.sequence_number = how < 0xE0 ? pose.sequence_number - how % 16 : f.U64();
+      recent.client_time_ns = static_cast<std::int64_t>(f.U64());
+      recent.position_m = how % 2 == 0 ? pose.position_m : hapco_idl_Vec3{f.Double(), f.Double(), f.Double()};
+    }
     const std::string id = service::ClientIdOf(pose.client_id);
     if (!service::IsValidClientId(id)) continue;
     auto it = sessions.find(id);
@@ -137,10 +154,25 @@ int PoseSession(const std::uint8_t* data, std::size_t size) {
       it = sessions.emplace(id, Client{}).first;
     }
     Client& client = it->second;
-    if (client.has_pending && pose.sequence_number <= client.pending.sequence_number) continue;
-    if (client.stream.Check(pose, now_ns, limits) != sim::PoseVerdict::kAccept) continue;
-    client.pending = pose;
-    client.has_pending = true;
+    const hapco_idl_DevicePose* last = client.pending.last();
+    if (last != nullptr && pose.sequence_number <= last->sequence_number) continue;
+    const std::uint64_t newest_known = client.newest_seen;
+    std::array<hapco_idl_DevicePose, hapco_idl_RECENT_SAMPLES> missed{};
+    const int count = service::MissedPoses(pose, newest_known, client.seen_any, &missed);
+    HAPCO_FUZZ_CHECK(count >= 0 && count <= hapco_idl_RECENT_SAMPLES, "more missed poses than repeats");
+    for (int k = 0; k < count; ++k) {
+      const hapco_idl_DevicePose& m = missed[static_cast<std::size_t>(k)];
+      HAPCO_FUZZ_CHECK(m.sequence_number > newest_known && m.sequence_number < pose.sequence_number,
+                       "recovered a pose outside (newest known, this pose)");
+      HAPCO_FUZZ_CHECK(k == 0 || m.sequence_number > missed[static_cast<std::size_t>(k - 1)].sequence_number,
+                       "recovered poses out of order");
+      if (client.stream.Check(m, now_ns, limits, client.pending.last()) != sim::PoseVerdict::kAccept) continue;
+      client.pending.Push(m, now_ns);
+    }
+    client.newest_seen = std::max(client.newest_seen, pose.sequence_number);
+    client.seen_any = true;
+    if (client.stream.Check(pose, now_ns, limits, client.pending.last()) != sim::PoseVerdict::kAccept) continue;
+    client.pending.Push(pose, now_ns);
   }
   return 0;
 }

@@ -1,0 +1,79 @@
+// The server's pose intake without DDS (service/pose_intake.h): recovering the poses a pose
+// repeats, the queue of poses waiting for a step, and a burst checked pose to pose.
+#include "service/pose_intake.h"
+
+#include <gtest/gtest.h>
+
+#include <array>
+
+namespace hapco::service {
+namespace {
+
+// Pose `sequence` at x = sequence mm, repeating the `repeats` poses before it (newest first).
+hapco_idl_DevicePose PoseWithRepeats(std::uint64_t sequence, std::uint32_t repeats) {
+  hapco_idl_DevicePose pose{};
+  pose.sequence_number = sequence;
+  pose.position_m = {1e-3 * static_cast<double>(sequence), 0, 0};
+  pose.orientation = {1, 0, 0, 0};
+  pose.recent_count = repeats;
+  for (std::uint32_t k = 0; k < repeats && k < hapco_idl_RECENT_SAMPLES; ++k) {
+    const std::uint64_t s = sequence - 1 - k;
+    pose.recent[k] = {s, static_cast<std::int64_t>(s) * 1'000'000, {1e-3 * static_cast<double>(s), 0, 0}};
+  }
+  return pose;
+}
+
+TEST(MissedPoses, RecoversOnlyWhatCameAfterTheNewestKnownOldestFirst) {
+  std::array<hapco_idl_DevicePose, hapco_idl_RECENT_SAMPLES> out{};
+  // Pose 20 repeats 19..8; the server stepped up to 16: 17, 18, 19 are missing.
+  const hapco_idl_DevicePose pose = PoseWithRepeats(20, hapco_idl_RECENT_SAMPLES);
+  ASSERT_EQ(MissedPoses(pose, 16, true, &out), 3);
+  for (int k = 0; k < 3; ++k) {
+    EXPECT_EQ(out[static_cast<std::size_t>(k)].sequence_number, 17u + static_cast<unsigned>(k));
+    EXPECT_DOUBLE_EQ(out[static_cast<std::size_t>(k)].position_m.x, 1e-3 * (17 + k)) << "its own position";
+    EXPECT_EQ(out[static_cast<std::size_t>(k)].recent_count, 0u) << "no repeats of its own";
+  }
+  EXPECT_EQ(MissedPoses(pose, 19, true, &out), 0) << "nothing missing";
+  EXPECT_EQ(MissedPoses(pose, 16, false, &out), 0) << "a new session does not step the poses before it";
+  // A count beyond the array reads the array only; repeats at or after the pose are ignored.
+  hapco_idl_DevicePose odd = PoseWithRepeats(20, hapco_idl_RECENT_SAMPLES);
+  odd.recent_count = 0xFFFFFFFFu;
+  odd.recent[0].sequence_number = 25;
+  EXPECT_EQ(MissedPoses(odd, 16, true, &out), 2) << "18 and 17 (19 was replaced by 25)";
+}
+
+TEST(PendingPoses, KeepsOrderAndSupersedesTheOldestWhenFull) {
+  PendingPoses pending;
+  EXPECT_EQ(pending.last(), nullptr);
+  for (int k = 1; k <= PendingPoses::kCapacity; ++k) {
+    EXPECT_FALSE(pending.Push(PoseWithRepeats(static_cast<std::uint64_t>(k), 0), k));
+  }
+  EXPECT_TRUE(pending.Push(PoseWithRepeats(100, 0), 100)) << "full: the oldest gives way";
+  ASSERT_EQ(pending.size(), PendingPoses::kCapacity);
+  EXPECT_EQ(pending.pose(0).sequence_number, 2u);
+  EXPECT_EQ(pending.last()->sequence_number, 100u);
+  EXPECT_EQ(pending.receive_ns(PendingPoses::kCapacity - 1), 100);
+  pending.Clear();
+  EXPECT_EQ(pending.size(), 0);
+}
+
+TEST(PoseStream, ABurstIsCheckedPoseToPose) {
+  sim::PoseLimits limits;  // 2 mm per tick
+  PoseStream stream;
+  hapco_idl_DevicePose a = PoseWithRepeats(1, 0);
+  a.position_m = {0, 0, 0};
+  ASSERT_EQ(stream.Check(a, 1'000'000, limits), sim::PoseVerdict::kAccept);
+  stream.Accept(a);
+  // Pending b at +2 mm, then c at -2 mm: 2 mm from a over two ticks is fine, but 4 mm from b
+  // in one tick is a jump.
+  hapco_idl_DevicePose b = PoseWithRepeats(2, 0), c = PoseWithRepeats(3, 0);
+  b.position_m = {0.002, 0, 0};
+  c.position_m = {-0.002, 0, 0};
+  ASSERT_EQ(stream.Check(b, 2'000'000, limits), sim::PoseVerdict::kAccept);
+  EXPECT_EQ(stream.Check(c, 3'000'000, limits), sim::PoseVerdict::kAccept) << "against a only: allowed";
+  EXPECT_EQ(stream.Check(c, 3'000'000, limits, &b), sim::PoseVerdict::kJump) << "against the pending b: a jump";
+  EXPECT_EQ(stream.Check(b, 3'000'000, limits, &b), sim::PoseVerdict::kDuplicate);
+}
+
+}  // namespace
+}  // namespace hapco::service
