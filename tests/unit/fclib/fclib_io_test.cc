@@ -282,6 +282,14 @@ TEST(FclibRead, FileThatCrashesHdf5IsRefused) {
   EXPECT_THROW(ReadFclibSolution(file), InputError);
 }
 
+// Found by the long fuzz run (tests/data/fuzz/fclib_local): HDF5 1.10.8 copies -1 bytes out
+// of a corrupt local heap while listing a group (H5Literate): a memory error inside libhdf5
+// (SIGSEGV in a release build), contained by the probe worker: refused, the process lives.
+TEST(FclibRead, FileOnWhichHdf5CopiesANegativeSizeIsRefused) {
+  const std::string file = std::string(HAPCO_SOURCE_DIR) + "/tests/data/fuzz/fclib_local/hdf5_memcpy_negative_size_in_heap.h5";
+  ExpectInputError(file, "HDF5 crashed reading the file");
+}
+
 // Found by the long fuzz run (tests/data/fuzz/fclib_local): a corrupt local heap makes
 // H5Lexists("/fclib_local/V") fail (-1); libfclib takes -1 for "exists", opens the group and
 // exits the process. The checks now refuse a failing lookup instead of reading it as absent.
