@@ -25,21 +25,27 @@ constexpr double kPassivityToleranceJ = 1e-4;  // docs/load-and-network.md
 long long Int(const std::map<std::string, std::string>& row, const char* key) { return std::stoll(row.at(key)); }
 double Num(const std::map<std::string, std::string>& row, const char* key) { return std::stod(row.at(key)); }
 
-TEST(LoadTestProcess, TwoClientsOnLoopbackKeepTheReportInvariants) {
-  const std::string dir = TestDir();
-  const std::string domain = std::to_string(SetUpTestDomain());
-  Process server({HAPCO_SERVER_EXE, kScene, "--domain", domain, "--status-period-s", "0.2", "--rt-priority", "80", "--quiet"},
-                 dir + "/server.out", dir + "/server.err");
+// Runs hapco-server with server_args, then hapco-loadtest with loadtest_args against it (output
+// in dir), stops the server; both must exit 0.
+void RunServerAndLoadTest(const std::string& dir, const std::vector<std::string>& server_args,
+                          const std::vector<std::string>& loadtest_args) {
+  Process server(server_args, dir + "/server.out", dir + "/server.err");
   {
-    Process loadtest({HAPCO_LOADTEST_EXE, kScene, "--clients", "2", "--duration-s", "3", "--domain", domain,
-                      "--trajectory-loop", "--client-prefix", "it", "--csv-dir", dir, "--rt-priority", "80",
-                      "--connect-timeout-s", "60"},
-                     dir + "/loadtest.out", dir + "/loadtest.err");
+    Process loadtest(loadtest_args, dir + "/loadtest.out", dir + "/loadtest.err");
     ASSERT_EQ(loadtest.Wait(120'000), 0) << ReadFile(dir + "/loadtest.err");
   }
   server.Signal(SIGTERM);
   ASSERT_EQ(server.Wait(30'000), 0) << ReadFile(dir + "/server.err");
   std::printf("%s", ReadFile(dir + "/loadtest.out").c_str());
+}
+
+TEST(LoadTestProcess, TwoClientsOnLoopbackKeepTheReportInvariants) {
+  const std::string dir = TestDir();
+  const std::string domain = std::to_string(SetUpTestDomain());
+  ASSERT_NO_FATAL_FAILURE(RunServerAndLoadTest(
+      dir, {HAPCO_SERVER_EXE, kScene, "--domain", domain, "--status-period-s", "0.2", "--rt-priority", "80", "--quiet"},
+      {HAPCO_LOADTEST_EXE, kScene, "--clients", "2", "--duration-s", "3", "--domain", domain, "--trajectory-loop",
+       "--client-prefix", "it", "--csv-dir", dir, "--rt-priority", "80", "--connect-timeout-s", "60"}));
 
   const auto summary = ReadCsv(dir + "/summary.csv");
   ASSERT_EQ(summary.size(), 3u);
@@ -133,17 +139,10 @@ void RunLocalModelClient(bool server_sends_models, const std::string& tag) {
   const std::string domain = std::to_string(SetUpTestDomain());
   std::vector<std::string> server_args = {HAPCO_SERVER_EXE, kScene, "--domain", domain, "--status-period-s", "0.2", "--quiet"};
   if (!server_sends_models) server_args.push_back("--no-local-model");
-  Process server(server_args, dir + "/server.out", dir + "/server.err");
-  {
-    Process loadtest({HAPCO_LOADTEST_EXE, kScene, "--clients", "1", "--duration-s", "3", "--domain", domain,
-                      "--mode", "hand", "--render", "local-model+passivity", "--client-prefix", "lm",
-                      "--csv-dir", dir, "--connect-timeout-s", "60"},
-                     dir + "/loadtest.out", dir + "/loadtest.err");
-    ASSERT_EQ(loadtest.Wait(120'000), 0) << ReadFile(dir + "/loadtest.err");
-  }
-  server.Signal(SIGTERM);
-  ASSERT_EQ(server.Wait(30'000), 0) << ReadFile(dir + "/server.err");
-  std::printf("%s", ReadFile(dir + "/loadtest.out").c_str());
+  ASSERT_NO_FATAL_FAILURE(RunServerAndLoadTest(
+      dir, server_args,
+      {HAPCO_LOADTEST_EXE, kScene, "--clients", "1", "--duration-s", "3", "--domain", domain, "--mode", "hand",
+       "--render", "local-model+passivity", "--client-prefix", "lm", "--csv-dir", dir, "--connect-timeout-s", "60"}));
   const auto summary = ReadCsv(dir + "/summary.csv");
   ASSERT_EQ(summary.size(), 2u);
   const auto& s = summary[0];
