@@ -17,6 +17,8 @@
 namespace hapco::service {
 namespace {
 
+// A peer server is live while its status keeps coming: three periods of the default 1 s.
+constexpr int64_t kPeerMaxAgeNs = 3'000'000'000LL;
 constexpr dds_attach_t kPoseToken = 1;
 constexpr dds_attach_t kSessionToken = 2;
 // Rate limiting is per kind; each pose verdict is a kind of its own (kLogBadPose + verdict).
@@ -41,6 +43,7 @@ ServerLoop::ServerLoop(std::vector<const sim::TwoBodyModel*> models, dds_domaini
       pose_reader_(client_subscriber_, pose_topic_, PoseQos().KeepLast(kMaxQueuedPoses)),
       session_reader_(client_subscriber_, session_topic_),
       status_writer_(publisher_, status_topic_),
+      peer_subscriber_(participant_),
       recorder_probe_publisher_(participant_, ClientPartition(".recorder-probe")),
       recorder_probe_(recorder_probe_publisher_, contact_topic_),
       waitset_(participant_),
@@ -59,6 +62,13 @@ ServerLoop::ServerLoop(std::vector<const sim::TwoBodyModel*> models, dds_domaini
   }
   if (options_.status_period_s <= 0) throw InputError("status period must be > 0 s");
   if (options_.max_sessions < 1) throw InputError("max sessions must be >= 1");
+  try {
+    peer_status_reader_.emplace(peer_subscriber_, status_topic_, StatusQos());
+  } catch (const DdsError& error) {
+    Log(kLogFailure, std::string("cannot read other servers' status (") + error.what() +
+                         "): serving as the only server on this domain (scripts/dds-security init gives "
+                         "servers that permission)");
+  }
   waitset_.Attach(pose_reader_.data_condition(), kPoseToken);
   waitset_.Attach(session_reader_.data_condition(), kSessionToken);
   step_times_us_.reserve(8192);
@@ -87,6 +97,7 @@ void ServerLoop::Run() {
     if (waiting_sessions) wait_ns = std::min<int64_t>(wait_ns, 2'000'000);  // poll their recorders
     waitset_.Wait(wait_ns, tokens, 4);
     if (stop_.load()) break;
+    ReadPeerStatus();
     ProcessSessionControls();
     waiting_sessions = OpenWaitingSessions(MonotonicNowNs());
     ProcessPoses();
@@ -94,6 +105,8 @@ void ServerLoop::Run() {
     if (now >= next_status_ns) {
       PublishStatus(now);
       next_status_ns = now + period_ns;
+    } else if (sessions_.size() != announced_sessions_) {
+      PublishStatus(now, false);  // joining clients choose by the number of sessions: say it now
     }
   }
   PublishStatus(MonotonicNowNs());
@@ -139,7 +152,8 @@ ServerLoop::Client* ServerLoop::OpenSession(const std::string& client_id, const 
   try {
     Client client;
     client.session = std::make_unique<Session>(client_id, model, participant_, force_topic_, contact_topic_,
-                                               options_.time_budget_s, options_.physics, options_.local_model);
+                                               options_.time_budget_s, options_.physics, options_.local_model,
+                                               options_.server_id);
     auto [it, inserted] = sessions_.emplace(client_id, std::move(client));
     HAPCO_ASSERT(inserted, "OpenSession: session exists already");
     ++counters_.sessions_opened;
@@ -223,6 +237,16 @@ void ServerLoop::ProcessSessionControls() {
     }
     if (!FromItsOwnWriter(id, session_reader_.handle(), info.publication_handle)) continue;
     auto it = sessions_.find(id);
+    if (!AddressedToMe(control.server_id)) {
+      // For another server. A JOIN there means the client moved: its session here ends (it
+      // never gets two servers' forces; server_choice.h).
+      if (control.command == hapco_idl_SESSION_JOIN && it != sessions_.end()) {
+        ++counters_.sessions_moved_away;
+        Log(kLogSession, "'" + id + "' joined server '" + ServerIdOf(control.server_id) + "': its session here closes");
+        CloseSession(it);
+      }
+      continue;
+    }
     switch (control.command) {
       case hapco_idl_SESSION_JOIN: {
         left_clients_.erase(id);
@@ -241,12 +265,17 @@ void ServerLoop::ProcessSessionControls() {
         }
         if (it == sessions_.end()) {
           OpenSession(id, *model);
+        } else if (control.client_time_ns > 0 && it->second.first_client_time_ns >= control.client_time_ns) {
+          // Every pose this session took was sent after the JOIN: they are the stream this JOIN
+          // starts (a client moved here and its first poses overtook its JOIN; DDS orders no
+          // two topics). The session keeps them and its state.
         } else {
           // A restarted client (its sequence starts again): a fresh stream and scene state.
           it->second.session->Reset();
           it->second.queued.Clear();
           it->second.newest_seen = 0;
           it->second.seen_any = false;
+          it->second.first_client_time_ns = -1;
           Log(kLogSession, "session of '" + id + "' joined again: reset");
         }
         break;
@@ -266,6 +295,7 @@ void ServerLoop::ProcessSessionControls() {
           it->second.queued.Clear();
           it->second.newest_seen = 0;
           it->second.seen_any = false;
+          it->second.first_client_time_ns = -1;
         }
         break;
       default:
@@ -303,6 +333,16 @@ void ServerLoop::ProcessPoses() {
     }
     if (!FromItsOwnWriter(id, pose_reader_.handle(), info.publication_handle)) continue;
     auto it = sessions_.find(id);
+    if (!AddressedToMe(pose.server_id)) {
+      ++counters_.poses_for_other_servers;  // another server's client: not bad input
+      if (it != sessions_.end() && pose.server_id[0] != '\0') {
+        // It moved (its JOIN elsewhere may not have reached this server): never answer twice.
+        ++counters_.sessions_moved_away;
+        Log(kLogSession, "'" + id + "' is served by '" + ServerIdOf(pose.server_id) + "': its session here closes");
+        CloseSession(it);
+      }
+      continue;
+    }
     Client* client = nullptr;
     if (it == sessions_.end()) {
       if (left_clients_.count(id) != 0) {
@@ -361,6 +401,7 @@ void ServerLoop::RecoverMissedPoses(Client* client, const hapco_idl_DevicePose& 
 }
 
 void ServerLoop::Queue(Client* client, const hapco_idl_DevicePose& pose, int64_t receive_ns) {
+  if (client->first_client_time_ns < 0) client->first_client_time_ns = pose.client_time_ns;
   if (client->queued.Push(pose, receive_ns)) ++counters_.superseded;  // more than a burst: the oldest gave way
 }
 
@@ -429,8 +470,39 @@ ServerCounters ServerLoop::counters() const {
   return c;
 }
 
-void ServerLoop::PublishStatus(int64_t now_ns) {
+void ServerLoop::ReadPeerStatus() {
+  hapco_idl_ServerStatus status{};
+  dds_sample_info_t info;
+  const int64_t now = MonotonicNowNs();
+  while (peer_status_reader_ && peer_status_reader_->Take(&status, &info)) {
+    if (!info.valid_data) continue;
+    ServerAnnouncement a = AnnouncementOf(status, now);
+    if (a.server_id == options_.server_id || a.server_id.empty()) continue;  // its own, or nameless
+    auto known = std::find_if(peers_.begin(), peers_.end(),
+                              [&a](const ServerAnnouncement& p) { return p.server_id == a.server_id; });
+    if (known != peers_.end()) {
+      *known = std::move(a);
+    } else if (peers_.size() < 256) {
+      peers_.push_back(std::move(a));
+    }
+  }
+  // A peer is live while its status keeps coming: three of its periods (1 s by default).
+  serves_unaddressed_ = ServesUnaddressed(options_.server_id, peers_, now, kPeerMaxAgeNs);
+}
+
+bool ServerLoop::AddressedToMe(const char (&field)[65]) const {
+  const std::size_t length = strnlen(field, sizeof(field));
+  if (length == 0) return serves_unaddressed_;
+  return length == options_.server_id.size() && std::memcmp(field, options_.server_id.data(), length) == 0;
+}
+
+void ServerLoop::PublishStatus(int64_t now_ns, bool period_end) {
   auto status = MakeSample<hapco_idl_ServerStatus>();
+  status->max_sessions = static_cast<uint32_t>(options_.max_sessions);
+  std::string scenes;
+  for (const sim::TwoBodyModel* model : models_) scenes += (scenes.empty() ? "" : ",") + model->scene().name;
+  std::snprintf(status->scene_names, sizeof(status->scene_names), "%s", scenes.c_str());
+  announced_sessions_ = sessions_.size();
   std::snprintf(status->server_id, sizeof(status->server_id), "%s", options_.server_id.c_str());
   status->uptime_ns = now_ns - start_ns_;
   status->sessions = static_cast<uint32_t>(sessions_.size());
@@ -447,28 +519,31 @@ void ServerLoop::PublishStatus(int64_t now_ns) {
   if (last_status_ns_ > 0 && now_ns > last_status_ns_) {
     status->cpu_use = static_cast<double>(cpu_ns - last_status_cpu_ns_) / static_cast<double>(now_ns - last_status_ns_);
   }
-  last_status_ns_ = now_ns;
-  last_status_cpu_ns_ = cpu_ns;
+  if (period_end) {
+    last_status_ns_ = now_ns;
+    last_status_cpu_ns_ = cpu_ns;
+  }
   const ServerCounters all = counters();
   status->steps = all.steps;
   status->superseded = all.superseded;
   status->contact_frames_dropped = all.contact_frames_dropped;
   status->non_finite_forces = all.non_finite_forces;
-  step_times_us_.clear();
+  if (period_end) step_times_us_.clear();
   if (status_writer_.Write(*status) == DDS_RETCODE_OK) ++counters_.status_published;
 }
 
 std::string ServerLoop::Summary() const {
   const ServerCounters c = counters();
   const auto& in = c.input;
-  char line[768];
+  char line[896];
   std::snprintf(line, sizeof(line),
                 "hapco-server: %llu steps (%llu ticks stepped several sessions on %d threads), "
                 "%llu sessions opened, %zu open; superseded %llu, stepped in bursts %llu, recovered %llu, "
                 "sequence gaps %llu; "
                 "bad input: nan %llu, workspace %llu, jumps %llu, out-of-order %llu, duplicates %llu, "
                 "unknown clients %llu, floods %llu, identity mismatches %llu; non-finite forces %llu, force write errors %llu, "
-                "contact frames dropped %llu; ignored-pose notices sent %llu",
+                "contact frames dropped %llu; ignored-pose notices sent %llu; poses for other servers %llu, "
+                "sessions moved to other servers %llu",
                 static_cast<unsigned long long>(c.steps), static_cast<unsigned long long>(c.parallel_batches),
                 pool_.threads(), static_cast<unsigned long long>(c.sessions_opened),
                 sessions_.size(), static_cast<unsigned long long>(c.superseded),
@@ -481,7 +556,9 @@ std::string ServerLoop::Summary() const {
                 static_cast<unsigned long long>(c.non_finite_forces),
                 static_cast<unsigned long long>(c.force_write_errors),
                 static_cast<unsigned long long>(c.contact_frames_dropped),
-                static_cast<unsigned long long>(c.ignored_notices));
+                static_cast<unsigned long long>(c.ignored_notices),
+                static_cast<unsigned long long>(c.poses_for_other_servers),
+                static_cast<unsigned long long>(c.sessions_moved_away));
   return line;
 }
 

@@ -14,18 +14,22 @@
 #include <set>
 #include <unordered_map>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "common/work_pool.h"
 #include "hapco_types.h"
 #include "service/dds.h"
+#include "service/server_choice.h"
 #include "service/session.h"
 #include "sim/two_body_model.h"
 
 namespace hapco::service {
 
 struct ServerOptions {
+  // Announced in ServerStatus; clients name it in their SESSION_JOIN and poses and only this
+  // server steps those (service/server_choice.h). hapco-server's default: DefaultServerId().
   std::string server_id = "hapco-server";
   double status_period_s = 1.0;  // ServerStatus period, s
   int max_sessions = 16;         // clients beyond this are refused (counted as unknown)
@@ -65,6 +69,8 @@ struct ServerCounters {
   uint64_t parallel_batches = 0;    // ticks that stepped two or more sessions on the pool
   uint64_t burst_steps = 0;         // poses stepped after another of the same client in one tick
   uint64_t recovered_poses = 0;     // poses never received, stepped from a later pose's repeats
+  uint64_t poses_for_other_servers = 0;  // addressed to another server (or unaddressed, not ours)
+  uint64_t sessions_moved_away = 0;  // closed because the client joined another server
 };
 
 class ServerLoop {
@@ -99,6 +105,8 @@ class ServerLoop {
     // (DevicePose.recent) at or before it are never looked at again.
     uint64_t newest_seen = 0;
     bool seen_any = false;
+    // client_time_ns of the first pose queued since the session opened or was reset (-1: none).
+    int64_t first_client_time_ns = -1;
     // Filled by the stepping job, read by the server thread after the batch.
     PendingPoses stepped;
     std::array<int64_t, kMaxQueuedPoses> step_ns{};
@@ -111,7 +119,13 @@ class ServerLoop {
   void RecoverMissedPoses(Client* client, const hapco_idl_DevicePose& pose, int64_t receive_ns);
   void Queue(Client* client, const hapco_idl_DevicePose& pose, int64_t receive_ns);
   void StepQueued();  // steps the queued poses of every session, on the pool
-  void PublishStatus(int64_t now_ns);
+  // period_end: the status period is over (step-time quantiles and CPU use restart);
+  // otherwise an announcement between periods after the number of sessions changed.
+  void PublishStatus(int64_t now_ns, bool period_end = true);
+  // Reads the other servers' announcements (their ServerStatus).
+  void ReadPeerStatus();
+  // True when this server steps the poses of a client addressed by `field` (its server_id).
+  bool AddressedToMe(const char (&field)[65]) const;
   // Opens the sessions whose recorders are ready (Session::TryOpen); true if any still waits.
   bool OpenWaitingSessions(int64_t now_ns);
   Client* OpenSession(const std::string& client_id, const sim::TwoBodyModel& model);
@@ -141,6 +155,13 @@ class ServerLoop {
   Reader<hapco_idl_DevicePose> pose_reader_;
   Reader<hapco_idl_SessionControl> session_reader_;
   Writer<hapco_idl_ServerStatus> status_writer_;
+  Subscriber peer_subscriber_;  // default partition, where every server's status is
+  // Absent when DDS refuses it (a secured deployment whose permissions predate several
+  // servers): then this server assumes it is alone (logged).
+  std::optional<Reader<hapco_idl_ServerStatus>> peer_status_reader_;
+  std::vector<ServerAnnouncement> peers_;  // the other servers' newest announcements
+  bool serves_unaddressed_ = true;         // ServesUnaddressed over peers_, per loop iteration
+  std::size_t announced_sessions_ = 0;     // sessions in the last status published
   // Never written: a contact-state writer in a partition of its own, so that its matched
   // readers are the wildcard (hapco/client/*) readers, i.e. the recorders present. A new
   // session opens once its own writer has matched as many (Session::TryOpen).

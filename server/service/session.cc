@@ -1,6 +1,7 @@
 #include "service/session.h"
 
 #include <algorithm>
+#include <cstring>
 #include <ctime>
 
 #include "common/realtime.h"
@@ -29,7 +30,7 @@ Session::Session(std::string client_id, const sim::TwoBodyModel& model,
                  const Participant& participant,
                  const Topic<hapco_idl_FeedbackForce>& force_topic,
                  const Topic<hapco_idl_ContactStateFrame>& contact_topic, double time_budget_s,
-                 SessionPhysics physics, bool local_model)
+                 SessionPhysics physics, bool local_model, std::string_view server_id)
     : client_id_(std::move(client_id)),
       physics_(physics),
       local_model_(local_model),
@@ -42,6 +43,11 @@ Session::Session(std::string client_id, const sim::TwoBodyModel& model,
   if (time_budget_s >= 0) sim_.parameters.time_budget_s = time_budget_s;
   SetClientId(force_.client_id, client_id_);
   SetClientId(frame_->client_id, client_id_);
+  // The answering server in every force and frame: a client (and a recorder) sees when it
+  // moves between servers (server_choice.h). Bounded like an id; longer ones are cut.
+  const std::size_t id_length = std::min(server_id.size(), sizeof(force_.server_id) - 1);
+  std::memcpy(force_.server_id, server_id.data(), id_length);
+  std::memcpy(frame_->server_id, server_id.data(), id_length);
   const auto capacity = static_cast<uint32_t>(
       std::min<std::size_t>(model.tool_candidates().size() + model.obstacle_edge_nodes().size(),
                             hapco_idl_MAX_CONTACT_SAMPLES));

@@ -51,7 +51,8 @@ class Session {
   Session(std::string client_id, const sim::TwoBodyModel& model, const Participant& participant,
           const Topic<hapco_idl_FeedbackForce>& force_topic,
           const Topic<hapco_idl_ContactStateFrame>& contact_topic, double time_budget_s = -1.0,
-          SessionPhysics physics = SessionPhysics::kContact, bool local_model = true);
+          SessionPhysics physics = SessionPhysics::kContact, bool local_model = true,
+          std::string_view server_id = {});
 
   const std::string& client_id() const { return client_id_; }
 

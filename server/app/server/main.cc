@@ -81,6 +81,12 @@ bool Parse(int argc, char** argv, Options* options) {
   command.AddDomain(&options->domain);
   std::string security_dir;
   command.AddSecurity(&security_dir, "DIR/server");
+  options->server.server_id = hapco::service::DefaultServerId();
+  command.AddText("--server-id", &options->server.server_id, "ID",
+                  "this server's name in ServerStatus, 1-64 of [A-Za-z0-9_.-] (default hapco-<hostname>-<pid>); "
+                  "with several servers on a domain each client is served by the one it chose "
+                  "(docs/several-servers.md)",
+                  hapco::cli::kGroupDds);
   command.AddNumber("--status-period-s", &options->server.status_period_s, "S",
                     "ServerStatus period, s (default 1)", hapco::cli::kGroupDds, 0, HUGE_VAL, true);
   command.AddInteger("--max-sessions", &options->server.max_sessions, "N",
@@ -125,6 +131,9 @@ bool Parse(int argc, char** argv, Options* options) {
     for (std::string& path : ReadSceneList(scene_list)) options->scene_paths.push_back(std::move(path));
   }
   if (options->scene_paths.empty()) throw hapco::InputError("missing SCENE argument (see --help)");
+  if (!hapco::service::IsValidClientId(options->server.server_id)) {
+    throw hapco::InputError("--server-id expects 1-64 of [A-Za-z0-9_.-], got '" + options->server.server_id + "'");
+  }
   options->server.physics =
       physics == "none" ? hapco::service::SessionPhysics::kNone : hapco::service::SessionPhysics::kContact;
   if (time_budget_ms >= 0) options->server.time_budget_s = time_budget_ms * 1e-3;
@@ -162,8 +171,9 @@ int Run(const Options& options) {
   }
   hapco::UseRealtimePriority(options.rt_priority, "hapco-server");
   hapco::service::ServerLoop server(served, options.domain, server_options);
-  std::printf("hapco-server: scene%s %s, domain %d, %d stepping thread%s%s, ready in %.2f s\n",
-              served.size() > 1 ? "s" : "", scenes_line.c_str(), options.domain, server_options.threads,
+  std::printf("hapco-server: scene%s %s, domain %d, server id %s, %d stepping thread%s%s, ready in %.2f s\n",
+              served.size() > 1 ? "s" : "", scenes_line.c_str(), options.domain, server_options.server_id.c_str(),
+              server_options.threads,
               server_options.threads > 1 ? "s" : "",
               server_options.physics == hapco::service::SessionPhysics::kNone ? ", physics none (zero force)" : "",
               setup.ElapsedSeconds());

@@ -1,0 +1,123 @@
+#include "service/server_choice.h"
+
+#include <sys/random.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <cstring>
+
+namespace hapco::service {
+namespace {
+
+// FNV-1a over "client\0server": a fixed hash (std::hash may differ between builds, and the
+// clients of one deployment must agree only with themselves, but a fixed one is testable).
+uint64_t RendezvousWeight(std::string_view client_id, std::string_view server_id) {
+  uint64_t h = 1469598103934665603ULL;
+  auto mix = [&h](std::string_view text) {
+    for (const unsigned char c : text) {
+      h ^= c;
+      h *= 1099511628211ULL;
+    }
+  };
+  mix(client_id);
+  mix(std::string_view("\0", 1));  // separator: ("ab", "c") and ("a", "bc") differ
+  mix(server_id);
+  // Finaliser (splitmix64): FNV's low bits alone spread poorly over similar ids.
+  h ^= h >> 30;
+  h *= 0xbf58476d1ce4e5b9ULL;
+  h ^= h >> 27;
+  h *= 0x94d049bb133111ebULL;
+  h ^= h >> 31;
+  return h;
+}
+
+bool IsIdCharacter(char c) {
+  return (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') || c == '_' || c == '.' ||
+         c == '-';
+}
+
+bool Serves(const ServerAnnouncement& server, std::string_view scene) {
+  if (scene.empty() || server.scenes.empty()) return true;
+  return std::find(server.scenes.begin(), server.scenes.end(), scene) != server.scenes.end();
+}
+
+bool Live(const ServerAnnouncement& server, int64_t now_ns, int64_t max_age_ns) {
+  return now_ns - server.heard_ns <= max_age_ns;
+}
+
+}  // namespace
+
+std::string ServerIdOf(const char (&field)[65]) { return std::string(field, strnlen(field, sizeof(field))); }
+
+ServerAnnouncement AnnouncementOf(const hapco_idl_ServerStatus& status, int64_t heard_ns) {
+  ServerAnnouncement a;
+  a.server_id = ServerIdOf(status.server_id);
+  a.sessions = status.sessions;
+  a.max_sessions = status.max_sessions;
+  a.heard_ns = heard_ns;
+  const std::string names(status.scene_names, strnlen(status.scene_names, sizeof(status.scene_names)));
+  std::size_t begin = 0;
+  while (begin < names.size()) {
+    std::size_t end = names.find(',', begin);
+    if (end == std::string::npos) end = names.size();
+    if (end > begin) a.scenes.push_back(names.substr(begin, end - begin));
+    begin = end + 1;
+  }
+  return a;
+}
+
+std::optional<std::string> ChooseServer(std::span<const ServerAnnouncement> servers, std::string_view client_id,
+                                        std::string_view scene, std::string_view avoid, int64_t now_ns,
+                                        int64_t max_age_ns) {
+  auto choose = [&](bool allow_avoided) -> std::optional<std::string> {
+    const ServerAnnouncement* best = nullptr;
+    double best_fill = 0;
+    uint64_t best_weight = 0;
+    for (const ServerAnnouncement& s : servers) {
+      if (s.server_id.empty() || !Live(s, now_ns, max_age_ns) || !Serves(s, scene)) continue;
+      if (!allow_avoided && s.server_id == avoid) continue;
+      if (s.max_sessions > 0 && s.sessions >= s.max_sessions) continue;  // full
+      const double fill = s.max_sessions > 0 ? static_cast<double>(s.sessions) / s.max_sessions : 0.0;
+      const uint64_t weight = RendezvousWeight(client_id, s.server_id);
+      if (best == nullptr || fill < best_fill || (fill == best_fill && weight > best_weight)) {
+        best = &s;
+        best_fill = fill;
+        best_weight = weight;
+      }
+    }
+    if (best == nullptr) return std::nullopt;
+    return best->server_id;
+  };
+  if (auto chosen = choose(false)) return chosen;
+  return choose(true);  // the avoided server is the only one left: try it again
+}
+
+bool ServesUnaddressed(std::string_view own_id, std::span<const ServerAnnouncement> others, int64_t now_ns,
+                       int64_t max_age_ns) {
+  for (const ServerAnnouncement& s : others) {
+    if (s.server_id != own_id && Live(s, now_ns, max_age_ns) && s.server_id < own_id) return false;
+  }
+  return true;
+}
+
+std::string DefaultServerId() {
+  char host[64] = {};
+  if (gethostname(host, sizeof(host) - 1) != 0) std::strcpy(host, "host");
+  std::string name;
+  for (const char c : std::string(host)) name += IsIdCharacter(c) ? c : '-';
+  // Host and pid alone collide: compose replicas may share a hostname and each be pid 1.
+  uint32_t salt = 0;
+  if (getrandom(&salt, sizeof(salt), 0) != static_cast<ssize_t>(sizeof(salt))) {
+    salt = static_cast<uint32_t>(std::chrono::steady_clock::now().time_since_epoch().count());
+  }
+  char suffix[32];
+  std::snprintf(suffix, sizeof(suffix), "-%d-%08x", static_cast<int>(getpid()), salt);
+  std::string id = "hapco-";
+  id.append(name, 0, 64 - id.size() - std::strlen(suffix));
+  id.append(suffix);
+  return id;
+}
+
+}  // namespace hapco::service

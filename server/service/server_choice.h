@@ -1,0 +1,60 @@
+#pragma once
+// Several hapco-servers on one DDS domain (docs/several-servers.md): which server serves
+// which client. An explicit assignment, not DDS ownership: with EXCLUSIVE ownership every
+// server would still step every pose (and pay for it) and the recorders would see the
+// weaker writers' frames; an assignment makes exactly one server step a client's poses.
+//   - Every server announces itself in ServerStatus (sessions, max_sessions, scenes).
+//   - A joining client chooses from the announcements (ChooseServer: the least loaded that
+//     serves its scene) and names the server in its SESSION_JOIN and in every pose.
+//   - A server steps only the poses addressed to it; a JOIN addressed to another server
+//     closes its session of that client (the client moved).
+//   - Poses addressed to nobody (a client not written for several servers) are stepped only
+//     by the live server with the smallest id (ServesUnaddressed).
+// Pure functions over plain data, no DDS entities (unit-tested in tests/unit/service).
+#include <cstdint>
+#include <optional>
+#include <span>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "hapco_types.h"
+
+namespace hapco::service {
+
+// One server as its newest ServerStatus announced it.
+struct ServerAnnouncement {
+  std::string server_id;
+  uint32_t sessions = 0;
+  uint32_t max_sessions = 0;
+  std::vector<std::string> scenes;  // served scene names; empty: unknown (any scene)
+  int64_t heard_ns = 0;             // CLOCK_MONOTONIC of the receiver when it arrived
+};
+
+// The announcement in a ServerStatus sample (scene_names split at commas).
+ServerAnnouncement AnnouncementOf(const hapco_idl_ServerStatus& status, int64_t heard_ns);
+
+// Chooses the server for `client_id` joining `scene` ("" = the server's first scene): among
+// the servers heard within max_age_ns of now_ns that serve the scene and have a free session,
+// not `avoid` (the server a client leaves) unless it is the only one, the one with the
+// smallest fill (sessions / max_sessions). Ties are broken by rendezvous hashing of
+// (client id, server id), so clients that join at once, all reading the same announcements,
+// spread over the servers instead of all choosing the first. nullopt: no server qualifies.
+std::optional<std::string> ChooseServer(std::span<const ServerAnnouncement> servers, std::string_view client_id,
+                                        std::string_view scene, std::string_view avoid, int64_t now_ns,
+                                        int64_t max_age_ns);
+
+// True when `own_id` steps poses addressed to no server: it is the smallest id among itself
+// and the other servers heard within max_age_ns of now_ns.
+bool ServesUnaddressed(std::string_view own_id, std::span<const ServerAnnouncement> others, int64_t now_ns,
+                       int64_t max_age_ns);
+
+// The id in a string<64> field, bounded even without a terminator.
+std::string ServerIdOf(const char (&field)[65]);
+
+// "hapco-<hostname>-<pid>-<32 random bits>", at most 64 characters of [A-Za-z0-9_.-]:
+// distinct for servers on one host and for the replicas of one compose service (which may
+// share a hostname and all be pid 1).
+std::string DefaultServerId();
+
+}  // namespace hapco::service

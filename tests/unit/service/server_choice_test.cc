@@ -1,0 +1,105 @@
+// Which server serves which client (service/server_choice.h): the least loaded server that
+// serves the scene, spread by rendezvous hashing when loads tie, never a full, silent or
+// avoided server while another qualifies; the unaddressed poses' server is the smallest live id.
+#include "service/server_choice.h"
+#include "service/pose_intake.h"
+
+#include <gtest/gtest.h>
+
+#include <unistd.h>
+
+#include <cstring>
+#include <map>
+#include <string>
+#include <vector>
+
+namespace hapco::service {
+namespace {
+
+constexpr int64_t kNow = 10'000'000'000LL;
+constexpr int64_t kMaxAge = 3'000'000'000LL;
+
+ServerAnnouncement Server(const std::string& id, uint32_t sessions, uint32_t max_sessions = 16,
+                          std::vector<std::string> scenes = {"bench1"}, int64_t heard_ns = kNow) {
+  return {id, sessions, max_sessions, std::move(scenes), heard_ns};
+}
+
+TEST(ChooseServer, TheLeastFilledServerOfTheSceneIsChosen) {
+  const std::vector<ServerAnnouncement> servers = {Server("a", 5), Server("b", 2), Server("c", 3),
+                                                   Server("d", 0, 16, {"other"})};
+  EXPECT_EQ(ChooseServer(servers, "client-1", "bench1", "", kNow, kMaxAge), "b");
+  EXPECT_EQ(ChooseServer(servers, "client-1", "other", "", kNow, kMaxAge), "d");
+  EXPECT_EQ(ChooseServer(servers, "client-1", "", "", kNow, kMaxAge), "d");  // no scene named: any
+  EXPECT_FALSE(ChooseServer(servers, "client-1", "unknown", "", kNow, kMaxAge).has_value());
+  // Fill, not count: 4 of 32 is less loaded than 2 of 8.
+  const std::vector<ServerAnnouncement> sized = {Server("small", 2, 8), Server("large", 4, 32)};
+  EXPECT_EQ(ChooseServer(sized, "client-1", "bench1", "", kNow, kMaxAge), "large");
+}
+
+TEST(ChooseServer, FullSilentAndAvoidedServersAreNotChosenWhileAnotherQualifies) {
+  const std::vector<ServerAnnouncement> servers = {Server("full", 16, 16), Server("silent", 0, 16, {"bench1"}, 0),
+                                                   Server("busy", 12), Server("left", 1)};
+  EXPECT_EQ(ChooseServer(servers, "c", "bench1", "", kNow, kMaxAge), "left");
+  EXPECT_EQ(ChooseServer(servers, "c", "bench1", "left", kNow, kMaxAge), "busy");  // moving away from "left"
+  // The avoided server is the only one left: it is tried again rather than no server at all.
+  const std::vector<ServerAnnouncement> alone = {Server("only", 3), Server("full", 16, 16)};
+  EXPECT_EQ(ChooseServer(alone, "c", "bench1", "only", kNow, kMaxAge), "only");
+  EXPECT_FALSE(ChooseServer(std::vector<ServerAnnouncement>{}, "c", "bench1", "", kNow, kMaxAge).has_value());
+}
+
+TEST(ChooseServer, ClientsJoiningAtOnceSpreadOverEquallyLoadedServers) {
+  // Every client reads the same announcements (all empty): the tie-break must not send them
+  // all to one server. 300 ids over three servers: each gets a share near a third.
+  const std::vector<ServerAnnouncement> servers = {Server("hapco-node1-17", 0), Server("hapco-node2-17", 0),
+                                                   Server("hapco-node3-17", 0)};
+  std::map<std::string, int> chosen;
+  for (int k = 1; k <= 300; ++k) {
+    const auto server = ChooseServer(servers, "phantom-" + std::to_string(k), "bench1", "", kNow, kMaxAge);
+    ASSERT_TRUE(server.has_value());
+    ++chosen[*server];
+  }
+  ASSERT_EQ(chosen.size(), 3u);
+  for (const auto& [id, count] : chosen) {
+    EXPECT_GT(count, 70) << id;
+    EXPECT_LT(count, 130) << id;
+  }
+  // A client's choice is stable (the same announcements give the same server).
+  EXPECT_EQ(ChooseServer(servers, "phantom-7", "bench1", "", kNow, kMaxAge),
+            ChooseServer(servers, "phantom-7", "bench1", "", kNow, kMaxAge));
+}
+
+TEST(ServesUnaddressed, OnlyTheSmallestLiveIdStepsUnaddressedPoses) {
+  const std::vector<ServerAnnouncement> peers = {Server("b", 0), Server("d", 0), Server("a", 0, 16, {}, 0)};
+  EXPECT_FALSE(ServesUnaddressed("c", peers, kNow, kMaxAge));  // "b" is live and smaller
+  EXPECT_TRUE(ServesUnaddressed("b", peers, kNow, kMaxAge));   // "a" is smaller but silent
+  EXPECT_TRUE(ServesUnaddressed("z", std::vector<ServerAnnouncement>{}, kNow, kMaxAge));  // alone
+}
+
+TEST(AnnouncementOf, ReadsTheStatusFieldsAndSplitsTheSceneNames) {
+  hapco_idl_ServerStatus status{};
+  std::strcpy(status.server_id, "hapco-host-12");
+  status.sessions = 3;
+  status.max_sessions = 16;
+  std::strcpy(status.scene_names, "bench1,bench2,,organ");
+  const ServerAnnouncement a = AnnouncementOf(status, 42);
+  EXPECT_EQ(a.server_id, "hapco-host-12");
+  EXPECT_EQ(a.sessions, 3u);
+  EXPECT_EQ(a.max_sessions, 16u);
+  EXPECT_EQ(a.heard_ns, 42);
+  EXPECT_EQ(a.scenes, (std::vector<std::string>{"bench1", "bench2", "organ"}));
+  // An id field without a terminator (any participant's bytes) is read bounded.
+  std::memset(status.server_id, 'x', sizeof(status.server_id));
+  EXPECT_EQ(AnnouncementOf(status, 0).server_id.size(), sizeof(status.server_id));
+}
+
+TEST(DefaultServerId, IsAValidIdThatNamesTheHostAndProcess) {
+  const std::string id = DefaultServerId();
+  EXPECT_EQ(id.rfind("hapco-", 0), 0u) << id;
+  EXPECT_LE(id.size(), 64u);
+  EXPECT_NE(id.find("-" + std::to_string(getpid()) + "-"), std::string::npos) << id;
+  EXPECT_TRUE(IsValidClientId(id)) << id;  // the server checks its id like a client id
+  EXPECT_NE(DefaultServerId(), id) << "two servers of one process image and pid must differ";
+}
+
+}  // namespace
+}  // namespace hapco::service
