@@ -33,7 +33,7 @@ SIGINT/SIGTERM: the run stops, the session is left and the summary printed.
 Exit code: 0 done, 1 bad input, 2 no server found, 3 DDS failure.)";
 
 struct Options {
-  std::string scene_path, client_id, mode = "kinematic", trajectory = "scene", csv_path, security_dir;
+  std::string scene_path, client_id, mode = "kinematic", trajectory = "scene", csv_path, security_dir, server_id;
   std::string render = "auto";
   int domain = 0, rt_priority = 0;
   double duration_s = 0, timeout_ms = 50, connect_timeout_s = 30, max_model_stiffness_n_per_m = 3000;
@@ -63,6 +63,10 @@ bool Parse(int argc, char** argv, Options* o) {
                       "run S seconds, holding the trajectory's last point after its end (default: the "
                       "trajectory's length)");
   command.AddDomain(&o->domain);
+  command.AddText("--server-id", &o->server_id, "ID",
+                  "be served by this server only (its --server-id); default: the least loaded server serving the "
+                  "scene, and another one if it stops answering (docs/several-servers.md)",
+                  hapco::cli::kGroupDds);
   command.AddSecurity(&o->security_dir, "DIR/<client id>");
   command.AddConnectTimeout(&o->connect_timeout_s, "wait at most S s for the server (default 30)");
   command.AddCsv(&o->csv_path,
@@ -119,6 +123,7 @@ int Run(const Options& o) {
   const int trajectory_ticks = static_cast<int>(config.trajectory.size()) - 1;
   config.ticks = o.duration_s > 0 ? static_cast<int>(std::lround(o.duration_s / config.safety.tick_s)) : trajectory_ticks;
   config.scene_name = scene.name;
+  config.server_id = o.server_id;
   config.safety.timeout_s = o.timeout_ms * 1e-3;
   config.connect_timeout_s = o.connect_timeout_s;
   config.drain_ticks = static_cast<int>(std::lround(o.timeout_ms));
@@ -149,6 +154,9 @@ int Run(const Options& o) {
     return 2;
   }
   const int64_t connected_ns = MonotonicNowNs();
+  std::fprintf(stderr, "hapco-phantom %s: served by %s\n", o.client_id.c_str(),
+               client.stats().server_id.empty() ? "the only server (no ServerStatus seen)"
+                                                : ("server '" + client.stats().server_id + "'").c_str());
   client.Run(
       g_stop,
       [csv](const phantom::TickRecord& t) {
@@ -163,7 +171,8 @@ int Run(const Options& o) {
               "  round trip (pose sampled -> force arrived): p50 %.0f us, p99 %.0f us, p99.9 %.0f us, max %.0f us\n"
               "  render latency (pose sampled -> rendering tick): p50 %.0f us, p99 %.0f us; server step+publish p50 %.0f us, p99 %.0f us\n"
               "  missed ticks %llu, stale ticks %llu, force timeouts %llu, resumed %llu, NaN forces %llu, clamped %llu, "
-              "peak rendered force %.3f N, pose write errors %llu\n",
+              "peak rendered force %.3f N, pose write errors %llu\n"
+              "  served by '%s' at the end, moved to another server %llu times\n",
               o.client_id.c_str(), s.ticks_run, static_cast<unsigned long long>(s.poses_published),
               static_cast<unsigned long long>(s.forces_received), g_stop.load() ? " (stopped by signal)" : "",
               hapco::QuantileOf(s.round_trip_us, 0.5), hapco::QuantileOf(s.round_trip_us, 0.99), hapco::QuantileOf(s.round_trip_us, 0.999), hapco::QuantileOf(s.round_trip_us, 1.0),
@@ -172,7 +181,8 @@ int Run(const Options& o) {
               static_cast<unsigned long long>(s.stale_ticks), static_cast<unsigned long long>(s.server_losses),
               static_cast<unsigned long long>(s.resumptions), static_cast<unsigned long long>(s.rejected_non_finite),
               static_cast<unsigned long long>(s.clamped), s.peak_rendered_n,
-              static_cast<unsigned long long>(s.pose_write_errors));
+              static_cast<unsigned long long>(s.pose_write_errors), s.server_id.c_str(),
+              static_cast<unsigned long long>(s.server_moves));
   if (config.render.mode == phantom::RenderMode::kLocalModel || config.render.passivity) {
     std::printf("  rendering %s: %llu ticks from a model (%llu models; stiffness capped %llu, extrapolation capped "
                 "%llu ticks, pull prevented %llu, friction cone %llu); passivity dissipated %.4f J on %lld ticks\n",

@@ -3,12 +3,16 @@
 #include <time.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
+#include <condition_variable>
 #include <cstdio>
+#include <mutex>
 
 #include "common/error.h"
 #include "common/realtime.h"
 #include "service/dds.h"
+#include "service/server_choice.h"
 
 namespace hapco::phantom {
 namespace {
@@ -53,7 +57,10 @@ struct PhantomClient::Dds {
         session_writer(publisher, session_topic),
         // Reader history 8 (the writer keeps 1; history is not request/offered): forces that
         // arrive back to back are all taken by the listener, none overwritten unseen.
-        force_reader(subscriber, force_topic, service::ForceQos().KeepLast(8)) {}
+        force_reader(subscriber, force_topic, service::ForceQos().KeepLast(8)),
+        status_topic(participant),
+        status_subscriber(participant),
+        status_reader(status_subscriber, status_topic, service::StatusQos()) {}
   // Declared first, destroyed last (children before their participant).
   service::Participant participant;
   service::Topic<hapco_idl_DevicePose> pose_topic;
@@ -64,7 +71,41 @@ struct PhantomClient::Dds {
   service::Writer<hapco_idl_DevicePose> pose_writer;
   service::Writer<hapco_idl_SessionControl> session_writer;
   service::Reader<hapco_idl_FeedbackForce> force_reader;
+  // The servers' announcements (ServerStatus, transient-local: a new reader gets each
+  // server's newest at once), kept by the receive thread, read when choosing a server.
+  service::Topic<hapco_idl_ServerStatus> status_topic;
+  service::Subscriber status_subscriber;
+  service::Reader<hapco_idl_ServerStatus> status_reader;
+  std::mutex servers_mutex;
+  std::condition_variable servers_changed;
+  std::vector<service::ServerAnnouncement> servers;
+
+  void OnStatusAvailable() {
+    hapco_idl_ServerStatus status{};
+    dds_sample_info_t info;
+    while (status_reader.Take(&status, &info)) {
+      if (!info.valid_data) continue;
+      service::ServerAnnouncement a = service::AnnouncementOf(status, MonotonicNowNs());
+      if (a.server_id.empty()) continue;
+      {
+        std::lock_guard<std::mutex> lock(servers_mutex);
+        auto known = std::find_if(servers.begin(), servers.end(),
+                                  [&a](const service::ServerAnnouncement& s) { return s.server_id == a.server_id; });
+        if (known != servers.end()) {
+          *known = std::move(a);
+        } else if (servers.size() < 256) {
+          servers.push_back(std::move(a));
+        }
+      }
+      servers_changed.notify_all();
+    }
+  }
 };
+
+namespace {
+// A server whose status has not come for this long is not chosen (three default periods).
+constexpr int64_t kServerMaxAgeNs = 3'000'000'000LL;
+}  // namespace
 
 PhantomClient::PhantomClient(ClientConfig config) : config_(std::move(config)) {
   service::ValidateClientId(config_.client_id);
@@ -75,13 +116,18 @@ PhantomClient::PhantomClient(ClientConfig config) : config_(std::move(config)) {
   stats_.server_time_us.reserve(static_cast<std::size_t>(config_.ticks) + 64);
   dds_ = std::make_unique<Dds>(config_);
   dds_->force_reader.SetOnDataAvailable([this] { OnForcesAvailable(); });
+  Dds* dds = dds_.get();
+  dds_->status_reader.SetOnDataAvailable([dds] { dds->OnStatusAvailable(); });
 }
 
 PhantomClient::~PhantomClient() {
   // No callback may run while dds_ is being reset (it reads through dds_): a force arriving
   // during the teardown crashed the phantom (seen: SIGSEGV in OnForcesAvailable on Cyclone's
   // gc thread, 1 in ~15 secured runs). ClearListener waits for a callback in progress.
-  if (dds_) dds_->force_reader.ClearListener();
+  if (dds_) {
+    dds_->force_reader.ClearListener();
+    dds_->status_reader.ClearListener();
+  }
   dds_.reset();
 }
 
@@ -172,11 +218,20 @@ bool PhantomClient::Connect(std::string* why, const std::function<void(const std
     }
     return false;
   }
-  auto control = service::MakeSample<hapco_idl_SessionControl>();
-  service::SetClientId(control->client_id, config_.client_id);
-  control->command = hapco_idl_SESSION_JOIN;
-  std::snprintf(control->scene_name, sizeof(control->scene_name), "%s", config_.scene_name.c_str());
-  service::CheckReturn(dds_->session_writer.Write(*control), "SESSION_JOIN");
+  if (!config_.server_id.empty()) {
+    server_id_ = config_.server_id;
+  } else {
+    // Every server found (one pose reader each) announces itself at once (transient-local
+    // status); wait for their announcements, at most 2 s, then choose.
+    const uint32_t servers_found = dds_->pose_writer.MatchedReaders();
+    {
+      std::unique_lock<std::mutex> lock(dds_->servers_mutex);
+      dds_->servers_changed.wait_for(lock, std::chrono::seconds(2),
+                                     [&] { return dds_->servers.size() >= servers_found; });
+    }
+    server_id_ = ChooseServer("");
+  }
+  SendJoin();
   if (!dds_->force_reader.WaitForWriters(1, timeout_ns)) {
     if (why != nullptr) {
       char seconds[32];
@@ -190,10 +245,30 @@ bool PhantomClient::Connect(std::string* why, const std::function<void(const std
   return true;
 }
 
+std::string PhantomClient::ChooseServer(const std::string& avoid) {
+  std::lock_guard<std::mutex> lock(dds_->servers_mutex);
+  return service::ChooseServer(dds_->servers, config_.client_id, config_.scene_name, avoid, MonotonicNowNs(),
+                               kServerMaxAgeNs)
+      .value_or(std::string());
+}
+
+void PhantomClient::SendJoin() {
+  hapco_idl_SessionControl control{};
+  service::SetClientId(control.client_id, config_.client_id);
+  control.command = hapco_idl_SESSION_JOIN;
+  std::snprintf(control.scene_name, sizeof(control.scene_name), "%s", config_.scene_name.c_str());
+  std::snprintf(control.server_id, sizeof(control.server_id), "%s", server_id_.c_str());
+  control.client_time_ns = MonotonicNowNs();
+  service::CheckReturn(dds_->session_writer.Write(control), "SESSION_JOIN");
+  stats_.server_id = server_id_;
+}
+
 void PhantomClient::Leave() {
   auto control = service::MakeSample<hapco_idl_SessionControl>();
   service::SetClientId(control->client_id, config_.client_id);
   control->command = hapco_idl_SESSION_LEAVE;
+  std::snprintf(control->server_id, sizeof(control->server_id), "%s", server_id_.c_str());
+  control->client_time_ns = MonotonicNowNs();
   dds_->session_writer.Write(*control);
   dds_->session_writer.WaitForAcks(DDS_MSECS(500));
 }
@@ -213,6 +288,7 @@ void PhantomClient::Run(const std::atomic<bool>& stop, const std::function<void(
   pose.orientation = {1.0, 0.0, 0.0, 0.0};
   pose.reported_round_trip_ns = -1;
   pose.recent_count = 0;  // the poses sent before, newest first (a server that missed one steps it)
+  std::snprintf(pose.server_id, sizeof(pose.server_id), "%s", server_id_.c_str());
 
   std::vector<ReceivedForce> taken;
   taken.reserve(kArrivalCapacity);
@@ -221,6 +297,8 @@ void PhantomClient::Run(const std::atomic<bool>& stop, const std::function<void(
   double last_notice_log_s = -1;  // when the last "server ignores poses" line was logged
   Eigen::Vector3d rendered = Eigen::Vector3d::Zero();
   Eigen::Vector3d previous_position = trajectory[0];
+  constexpr int64_t kMoveRetryNs = 100'000'000, kMinMoveIntervalNs = 1'000'000'000;
+  int64_t last_move_try_ns = 0, last_move_ns = -kMinMoveIntervalNs;
   const int64_t start_ns = MonotonicNowNs();
   int64_t deadline_ns = start_ns + period_ns;
   int drained = 0;
@@ -348,6 +426,30 @@ void PhantomClient::Run(const std::atomic<bool>& stop, const std::function<void(
       }
     }
     was_stale = stale;
+    // Its server stopped answering: move to another one that serves the scene, if any (tried
+    // every 100 ms while no force comes, so a server that appears later is found too; at
+    // most one move a second, so a loaded machine's stalls do not bounce a client around).
+    // It starts from the reference configuration at the device's position; the safety filter
+    // ramps the force back up. The old server, if only slow, sees the JOIN or a pose
+    // addressed elsewhere and closes its session: no client is ever answered by two servers.
+    if (stale && config_.server_id.empty() && now - last_move_try_ns >= kMoveRetryNs &&
+        now - last_move_ns >= kMinMoveIntervalNs) {
+      last_move_try_ns = now;
+      const std::string next = ChooseServer(server_id_);
+      if (!next.empty() && next != server_id_) {
+        if (log) {
+          char line[240];
+          std::snprintf(line, sizeof(line), "t=%.3f s: moving from server '%s' to '%s'", now_s, server_id_.c_str(),
+                        next.c_str());
+          log(line);
+        }
+        server_id_ = next;
+        last_move_ns = now;
+        ++stats_.server_moves;
+        SendJoin();
+        std::snprintf(pose.server_id, sizeof(pose.server_id), "%s", server_id_.c_str());
+      }
+    }
     if (on_tick) {
       TickRecord record;
       record.tick = tick;

@@ -41,6 +41,9 @@ struct ClientConfig {
   std::vector<Eigen::Vector3d> trajectory;        // points 0..N, m; tick k targets point min(k, N)
   int ticks = 0;                                  // poses to publish (> 0)
   std::string scene_name;                         // sent with SESSION_JOIN
+  // The server to be served by; empty: the least loaded one serving the scene, chosen from
+  // the servers' ServerStatus, and another one when it stops answering (docs/several-servers.md).
+  std::string server_id;
   SafetyParameters safety;                        // timeout, ramp, limits; tick_s is the servo period
   RendererParameters render;                      // direct / local-model, passivity (force_renderer.h)
   HandParameters hand;
@@ -102,6 +105,8 @@ struct ClientStats {
   uint64_t server_losses = 0;       // times the force timeout engaged (ramp to zero)
   uint64_t resumptions = 0;         // times forces came back after a timeout
   uint64_t ignored_notices = 0;     // notices "the server ignored pose N" received
+  uint64_t server_moves = 0;        // times this client moved to another server after a timeout
+  std::string server_id;            // the server serving it at the end (empty: unaddressed)
   uint64_t server_ignored_poses = 0;  // the server's count in the newest sample
   double peak_rendered_n = 0;
   RendererStats render;                 // the force renderer's counts (force_renderer.h)
@@ -122,7 +127,8 @@ class PhantomClient {
   PhantomClient(const PhantomClient&) = delete;
   PhantomClient& operator=(const PhantomClient&) = delete;
 
-  // Waits for the server's readers, sends SESSION_JOIN and waits until the server's force
+  // Waits for the servers' readers and announcements, chooses a server (ClientConfig::server_id),
+  // sends SESSION_JOIN and waits until the server's force
   // writer for this client matches, so the first pose already gets its force. False (with
   // the reason in *why) if no server answers within connect_timeout_s. `progress` (optional)
   // gets a line after 0.5 s without a server, and again every 5 s, so a user waiting for a
@@ -150,6 +156,11 @@ class PhantomClient {
   void PushArrival(uint64_t pose_sequence, int64_t client_time_ns, int64_t now_ns, int64_t server_time_ns,
                    const Eigen::Vector3d& force_n, const ::hapco_idl_FeedbackForce* sample, bool recovered);
   uint64_t newest_arrival_sequence_ = 0;  // receive thread only
+  // The server for this client now (chosen from the announcements), "" for none known.
+  std::string ChooseServer(const std::string& avoid);
+  // SESSION_JOIN addressed to server_id_ (tick thread or Connect).
+  void SendJoin();
+  std::string server_id_;
 
   // Single-producer (receive thread) single-consumer (tick thread) queue of arrivals.
   static constexpr uint32_t kArrivalCapacity = 256;

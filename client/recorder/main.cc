@@ -122,6 +122,7 @@ void Set(hapco::recording::Vec3* out, const hapco_idl_Vec3& v) {
 // whose frames were lost around it (docs/recorder.md).
 struct ClientState {
   bool have_frame = false;
+  std::string server_id;        // the server of the last frame: another one starts a new session
   uint64_t last_step = 0, last_frame_sequence = 0;
   std::deque<hapco_idl_FeedbackForce> pending;
   uint64_t steps = 0;           // Step records written for this client
@@ -155,7 +156,11 @@ class Recorder {
 
   void OnFrame(const hapco_idl_ContactStateFrame& frame) {
     ClientState& c = clients_[frame.client_id];
-    const bool new_session = c.have_frame && frame.step <= c.last_step;
+    // A session starts again when its step counter does (re-opened) or when another server
+    // steps the client (it moved after its server stopped answering: docs/several-servers.md).
+    const std::string server_id(frame.server_id, strnlen(frame.server_id, sizeof(frame.server_id)));
+    const bool new_session = c.have_frame && (frame.step <= c.last_step || server_id != c.server_id);
+    c.server_id = server_id;
     // Steps without a frame: a gap after the previous frame, or the steps before the first
     // frame of a session (the counter starts at 1; a recorder started mid-session counts the
     // steps it did not see).
@@ -247,6 +252,7 @@ class Recorder {
     step->Clear();  // keeps the repeated field's allocated elements for reuse
     step->set_step(f.step);
     step->set_client_id(f.client_id);
+    step->set_server_id(f.server_id, strnlen(f.server_id, sizeof(f.server_id)));
     step->set_time_ns(f.server_receive_ns);
     Set(step->mutable_device_translation_m(), f.device_position_m);
     Set(step->mutable_contact_force_n(), f.contact_force_n);
@@ -283,6 +289,7 @@ class Recorder {
     step->Clear();
     step->set_step(step_number);
     step->set_client_id(client_id);
+    step->set_server_id(f.server_id, strnlen(f.server_id, sizeof(f.server_id)));
     step->set_time_ns(f.server_receive_ns);
     Set(step->mutable_device_force_n(), f.force_n);
     step->set_solver_status(StatusName(f.solver_status));

@@ -6,6 +6,7 @@
 #include <fcntl.h>
 #include <gtest/gtest.h>
 #include <poll.h>
+#include <sys/inotify.h>
 #include <signal.h>
 #include <spawn.h>
 #include <sys/syscall.h>
@@ -14,6 +15,7 @@
 
 #include <Eigen/Dense>
 
+#include <chrono>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -121,6 +123,33 @@ inline dds_domainid_t SetUpTestDomain() {
   UseLoopbackConfig();  // children inherit CYCLONEDDS_URI
   const ::testing::TestInfo* info = ::testing::UnitTest::GetInstance()->current_test_info();
   return DomainIdForName(std::string(info->test_suite_name()) + "." + info->name());
+}
+
+// Waits (inotify, bounded) until `done()` holds; `done` is checked after every change of
+// the file at `path` (which must exist). False on timeout.
+template <typename Predicate>
+inline bool WaitForFile(const std::string& path, int timeout_ms, Predicate done) {
+  const int fd = inotify_init1(IN_CLOEXEC);
+  if (fd < 0) return false;
+  inotify_add_watch(fd, path.c_str(), IN_MODIFY | IN_CLOSE_WRITE);
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
+  bool ok = done();
+  while (!ok) {
+    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
+    if (left.count() <= 0) break;
+    pollfd p{fd, POLLIN, 0};
+    if (poll(&p, 1, static_cast<int>(left.count())) == 1) {
+      char events[4096];
+      if (read(fd, events, sizeof(events)) < 0) break;
+    }
+    ok = done();
+  }
+  close(fd);
+  return ok;
+}
+
+inline bool WaitForText(const std::string& path, const std::string& text, int timeout_ms) {
+  return WaitForFile(path, timeout_ms, [&] { return ReadFile(path).find(text) != std::string::npos; });
 }
 
 }  // namespace hapco::service

@@ -3,8 +3,6 @@
 // --trace file (one row per step it made, written by the server, not by the recorder).
 // No sleeps: waits are process exits (pidfd), and file growth / output text seen through
 // inotify, all bounded.
-#include <sys/inotify.h>
-
 #include <array>
 #include <cmath>
 #include <cstdint>
@@ -20,33 +18,6 @@ namespace hapco::service {
 namespace {
 
 const std::string kScene = std::string(HAPCO_SOURCE_DIR) + "/tests/data/scenes/coarse.txtpb";
-
-// Waits (inotify, bounded) until `done()` holds; `done` is checked after every change of
-// the file at `path` (which must exist). False on timeout.
-template <typename Predicate>
-bool WaitForFile(const std::string& path, int timeout_ms, Predicate done) {
-  const int fd = inotify_init1(IN_CLOEXEC);
-  if (fd < 0) return false;
-  inotify_add_watch(fd, path.c_str(), IN_MODIFY | IN_CLOSE_WRITE);
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
-  bool ok = done();
-  while (!ok) {
-    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
-    if (left.count() <= 0) break;
-    pollfd p{fd, POLLIN, 0};
-    if (poll(&p, 1, static_cast<int>(left.count())) == 1) {
-      char events[4096];
-      if (read(fd, events, sizeof(events)) < 0) break;
-    }
-    ok = done();
-  }
-  close(fd);
-  return ok;
-}
-
-bool WaitForText(const std::string& path, const std::string& text, int timeout_ms) {
-  return WaitForFile(path, timeout_ms, [&] { return ReadFile(path).find(text) != std::string::npos; });
-}
 
 // The recorder is up and has discovered the server (it received the transient-local status),
 // so the server knows the recorder's readers before any session writer is created.

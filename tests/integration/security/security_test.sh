@@ -190,7 +190,7 @@ fi
 # so the recording holds every step the server made for alice and bob.
 for who in alice bob; do
   stepped=$(grep -c "^$who," "$work/trace.csv")
-  if grep -qE "client +$who: $stepped steps \(1\.\.$stepped\), 0 not in the file" "$work/report.out"; then
+  if grep -qE "client +$who: $stepped steps in 1 session \(1\.\.$stepped( on [^)]*)?\), 0 not in the file" "$work/report.out"; then
     ok "secured recorder: $who: all $stepped steps the server made, from step 1"
   else bad "recording of $who incomplete (server stepped $stepped): $(grep -E "client +$who" "$work/report.out")"; fi
 done

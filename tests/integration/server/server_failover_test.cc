@@ -8,11 +8,17 @@
 #include <cstdio>
 #include <fstream>
 #include <map>
+#include <memory>
+#include <set>
 #include <string>
 #include <vector>
 
 #include "../process_support.h"
+#include "common/realtime.h"
 #include "service/dds.h"
+#include "service/qos.h"
+#include "service/pose_intake.h"
+#include "service/server_choice.h"
 
 namespace hapco::service {
 namespace {
@@ -209,6 +215,195 @@ TEST(ServerFailover, AClientBeyondMaxSessionsIsRefusedWithAClearMessage) {
   ASSERT_EQ(server.Wait(30'000), 0);
   EXPECT_NE(ReadFile(dir + "/server.err").find("session refused for 'second'"), std::string::npos)
       << ReadFile(dir + "/server.err");
+}
+
+// Several servers on one domain (docs/several-servers.md): three servers, four clients that
+// choose their server from the announcements. Each client is answered by one server only; when
+// the server with the most clients is killed, each of its clients moves to another server and
+// has forces again within 100 ms of its safety timeout, with the device limits kept throughout;
+// no pose is ever answered by two servers.
+TEST(ServerFailover, ThreeServersServeEachClientOnceAndTakeOverTheClientsOfOneThatDies) {
+  const std::string dir = TestDir();
+  const dds_domainid_t domain_id = SetUpTestDomain();
+  const std::string domain = std::to_string(domain_id);
+  const std::string trajectory = WritePressTrajectory(dir);
+  Participant participant(domain_id);
+  Topic<hapco_idl_FeedbackForce> force_topic(participant);
+  Topic<hapco_idl_ServerStatus> status_topic(participant);
+  Subscriber all_clients(participant, kAllClientsPartition);
+  Subscriber default_partition(participant);
+  Reader<hapco_idl_FeedbackForce> forces(all_clients, force_topic, ForceQos().KeepLast(64));
+  Reader<hapco_idl_ServerStatus> statuses(default_partition, status_topic, StatusQos());
+
+  const std::vector<std::string> ids = {"s1", "s2", "s3"};
+  std::map<std::string, std::unique_ptr<Process>> servers;
+  for (const std::string& id : ids) {
+    servers[id] = std::make_unique<Process>(
+        std::vector<std::string>{HAPCO_SERVER_EXE, kScene, "--domain", domain, "--server-id", id, "--threads", "1",
+                                 "--trace", dir + "/trace-" + id + ".csv"},
+        dir + "/server-" + id + ".out", dir + "/server-" + id + ".err");
+  }
+  // All three announce themselves before any client chooses.
+  std::set<std::string> announced;
+  const dds_time_t deadline = dds_time() + DDS_SECS(90);
+  hapco_idl_ServerStatus status{};
+  while (announced.size() < ids.size() && dds_time() < deadline) {
+    if (!statuses.WaitForData(DDS_MSECS(200))) continue;
+    while (statuses.Take(&status)) announced.insert(ServerIdOf(status.server_id));
+  }
+  ASSERT_EQ(announced.size(), ids.size()) << ReadFile(dir + "/server-s1.err");
+  // A recorder of every session on every server (steps carry the server that made them).
+  const std::string recording = dir + "/sessions.hapcorec";
+  Process recorder({HAPCO_RECORDER_EXE, kScene, "--output", recording, "--domain", domain}, dir + "/recorder.out",
+                   dir + "/recorder.err");
+  ASSERT_TRUE(WaitForText(dir + "/recorder.out", "found", 60'000)) << ReadFile(dir + "/recorder.err");
+
+  constexpr int kClients = 4;
+  std::vector<std::unique_ptr<Process>> phantoms;
+  for (int k = 1; k <= kClients; ++k) {
+    const std::string id = "phantom-" + std::to_string(k);
+    phantoms.push_back(std::make_unique<Process>(
+        std::vector<std::string>{HAPCO_PHANTOM_EXE, kScene, "--client-id", id, "--domain", domain, "--trajectory",
+                                 trajectory, "--duration-s", "6", "--force-timeout-ms", "50", "--csv",
+                                 dir + "/" + id + ".csv", "--connect-timeout-s", "60"},
+        dir + "/" + id + ".out", dir + "/" + id + ".err"));
+  }
+
+  // Who answers whom, as the forces arrive here (stamped on arrival).
+  struct Seen {
+    std::set<std::string> servers;
+    std::string last_server;
+    int64_t last_arrival_ns = 0;
+    std::map<uint64_t, std::string> answered_by;  // pose sequence -> server
+  };
+  std::map<std::string, Seen> seen;
+  std::vector<std::string> doubles;  // "client sequence: server a and server b"
+  auto take_forces = [&](std::map<std::string, int64_t>* first_after_kill, const std::string& killed) {
+    hapco_idl_FeedbackForce f{};
+    while (forces.Take(&f)) {
+      if (f.pose_verdict != hapco_idl_POSE_STEPPED) continue;
+      const int64_t now = MonotonicNowNs();
+      const std::string client = ClientIdOf(f.client_id), server = ServerIdOf(f.server_id);
+      Seen& s = seen[client];
+      auto [it, inserted] = s.answered_by.emplace(f.pose_sequence, server);
+      if (!inserted && it->second != server) {
+        doubles.push_back(client + " " + std::to_string(f.pose_sequence) + ": " + it->second + " and " + server);
+      }
+      if (first_after_kill != nullptr && server != killed && s.last_server == killed &&
+          first_after_kill->count(client) == 0) {
+        (*first_after_kill)[client] = now - s.last_arrival_ns;  // the gap this client saw
+      }
+      if (first_after_kill == nullptr || server != killed) {
+        s.servers.insert(server);
+        s.last_server = server;
+        s.last_arrival_ns = now;
+      }
+    }
+  };
+  // Every client served and pushing (its forces come from one server each) for 1 s.
+  while (dds_time() < deadline) {
+    if (forces.WaitForData(DDS_MSECS(100))) take_forces(nullptr, "");
+    bool all = seen.size() == kClients;
+    for (const auto& [client, s] : seen) all = all && s.answered_by.size() >= 1000;
+    if (all) break;
+  }
+  ASSERT_EQ(seen.size(), static_cast<std::size_t>(kClients)) << ReadFile(dir + "/phantom-1.err");
+  std::map<std::string, int> clients_of;
+  for (const auto& [client, s] : seen) {
+    // (One server each unless a loaded machine stalled the client past its timeout: then it
+    // moved, and its old server stopped answering it.)
+    if (s.servers.size() > 1) std::printf("%s moved before the kill\n", client.c_str());
+    ++clients_of[s.last_server];
+  }
+  EXPECT_GE(clients_of.size(), 2u) << "the clients did not spread over the servers";
+  std::string killed;
+  for (const auto& [server, count] : clients_of) {
+    if (killed.empty() || count > clients_of[killed]) killed = server;
+  }
+  std::printf("clients per server before the kill:");
+  for (const auto& [server, count] : clients_of) std::printf(" %s %d", server.c_str(), count);
+  std::printf("; killing %s\n", killed.c_str());
+  servers[killed]->Signal(SIGKILL);
+  ASSERT_EQ(servers[killed]->Wait(10'000), 128 + SIGKILL);
+
+  // Until every phantom has ended: forces of the moved clients from the other servers.
+  std::map<std::string, int64_t> gap_ns;
+  std::vector<int> exit_codes(kClients, -1);
+  for (std::size_t k = 0; k < exit_codes.size(); ++k) {
+    while ((exit_codes[k] = phantoms[k]->Wait(0)) == -1 && dds_time() < deadline) {
+      if (forces.WaitForData(DDS_MSECS(50))) take_forces(&gap_ns, killed);
+    }
+  }
+  take_forces(&gap_ns, killed);
+  for (std::size_t k = 0; k < exit_codes.size(); ++k) {
+    const std::string id = "phantom-" + std::to_string(k + 1);
+    EXPECT_EQ(exit_codes[k], 0) << id << ": " << ReadFile(dir + "/" + id + ".err");
+  }
+  EXPECT_TRUE(doubles.empty()) << doubles.size() << " poses answered by two servers, first " << doubles.front();
+  for (const auto& [client, s] : seen) {
+    const std::string out = ReadFile(dir + "/" + client + ".out");
+    if (clients_of.count(killed) != 0 && gap_ns.count(client) == 0 && s.servers.count(killed) != 0) {
+      ADD_FAILURE() << client << " was served by " << killed << " and never got a force from another server: "
+                    << ReadFile(dir + "/" + client + ".err");
+      continue;
+    }
+    if (gap_ns.count(client) != 0) {
+      // Timeout (50 ms) + a new session on another server: forces within 100 ms of the timeout.
+      const double gap_ms = static_cast<double>(gap_ns[client]) * 1e-6;
+      std::printf("%s moved from %s to %s: %.1f ms without a force\n", client.c_str(), killed.c_str(),
+                  s.last_server.c_str(), gap_ms);
+      EXPECT_LT(gap_ms, kTimeoutS * 1e3 + 100.0) << client;
+      EXPECT_EQ(out.find("moved to another server 0 times"), std::string::npos) << out;
+    }
+    // (A client of a surviving server may move too: on a loaded machine its own stalls can
+    // pass the timeout. Wherever it went, it ended on a live server.)
+    EXPECT_EQ(out.find("served by '" + killed + "' at the end"), std::string::npos) << out;
+    EXPECT_NE(out.find("served by 's"), std::string::npos) << out;
+    // The device limits in every tick, across the move.
+    const std::vector<Tick> ticks = ReadTicks(dir + "/" + client + ".csv");
+    ASSERT_GE(ticks.size(), 5000u) << client;
+    for (std::size_t i = 1; i < ticks.size(); ++i) {
+      ASSERT_TRUE(ticks[i].rendered_n.allFinite()) << client << " tick " << ticks[i].tick;
+      ASSERT_LE(ticks[i].rendered_n.norm(), kMaxForceN + 1e-12) << client << " tick " << ticks[i].tick;
+      const double allowed_n = std::max(kMaxChangePerTickN, 250.0 * (ticks[i].time_s - ticks[i - 1].time_s)) + 5e-4;
+      ASSERT_LE((ticks[i].rendered_n - ticks[i - 1].rendered_n).norm(), allowed_n) << client << " tick " << ticks[i].tick;
+    }
+  }
+  EXPECT_EQ(gap_ns.size(), static_cast<std::size_t>(clients_of[killed]));
+  // The servers' own traces: no (client, pose) stepped by two servers (the killed server's
+  // trace may miss its last buffered rows, never hold a pose another server stepped).
+  std::map<std::pair<std::string, std::string>, std::string> stepped_by;
+  for (const std::string& id : ids) {
+    if (id != killed) {
+      servers[id]->Signal(SIGTERM);
+      ASSERT_EQ(servers[id]->Wait(30'000), 0) << ReadFile(dir + "/server-" + id + ".err");
+    }
+    for (const auto& row : ReadCsv(dir + "/trace-" + id + ".csv")) {
+      if (row.count("step_us") == 0) continue;  // the killed server's last row, torn by the kill
+      auto [it, inserted] = stepped_by.emplace(std::make_pair(row.at("client_id"), row.at("sequence")), id);
+      ASSERT_TRUE(inserted) << row.at("client_id") << " pose " << row.at("sequence") << " stepped by " << it->second
+                            << " and " << id;
+    }
+  }
+  // The report tells each moved client's sessions apart: one on the killed server, then one on
+  // the server it moved to, each counted from its own step 1.
+  recorder.Signal(SIGTERM);
+  ASSERT_EQ(recorder.Wait(30'000), 0) << ReadFile(dir + "/recorder.err");
+  Process report({HAPCO_REPORT_EXE, recording}, dir + "/report.out", dir + "/report.err");
+  ASSERT_EQ(report.Wait(60'000), 0) << ReadFile(dir + "/report.err");
+  const std::string report_text = ReadFile(dir + "/report.out");
+  for (const auto& [client, gap] : gap_ns) {
+    const auto line_at = report_text.find("client     " + client + ": ");
+    ASSERT_NE(line_at, std::string::npos) << report_text;
+    const std::string line = report_text.substr(line_at, report_text.find('\n', line_at) - line_at);
+    std::printf("%s\n", line.c_str());
+    EXPECT_EQ(line.find(" in 1 session "), std::string::npos) << line;
+    EXPECT_NE(line.find("1.."), std::string::npos) << line;
+    EXPECT_NE(line.find(" on " + killed), std::string::npos) << line;
+    EXPECT_NE(line.find(" on " + seen[client].last_server), std::string::npos) << line;
+  }
+  // Most of the 4 x 6000 poses (under load some are superseded; the killed trace loses its buffer).
+  EXPECT_GT(stepped_by.size(), static_cast<std::size_t>(kClients) * 3000u);
 }
 
 }  // namespace
