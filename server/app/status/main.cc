@@ -8,12 +8,15 @@
 #include <cinttypes>
 #include <cmath>
 #include <cstdio>
+#include <map>
 #include <string>
 
 #include "cli/command_line.h"
 #include "cli/run_main.h"
 #include "common/error.h"
 #include "service/dds.h"
+#include "service/qos.h"
+#include "service/server_choice.h"
 
 namespace {
 
@@ -53,34 +56,48 @@ int Run(const Options& o) {
   svc::Participant participant(o.domain, svc::SecurityIdentity{o.security_dir, "monitor"});  // disabled without --security
   svc::Topic<hapco_idl_ServerStatus> topic(participant);
   svc::Subscriber subscriber(participant);
-  svc::Reader<hapco_idl_ServerStatus> reader(subscriber, topic);
+  // Transient-local: every server's newest status arrives as soon as it is matched.
+  svc::Reader<hapco_idl_ServerStatus> reader(subscriber, topic, svc::StatusQos());
   auto status = svc::MakeSample<hapco_idl_ServerStatus>();
 
-  const dds_time_t deadline = dds_time() + Seconds(o.timeout_s);
+  // Several servers may share the domain (docs/several-servers.md): after the first status, the
+  // others' for kOthersWindowS more (each announces itself at once when matched), one line each.
+  constexpr double kOthersWindowS = 0.3;
+  std::map<std::string, std::string> lines;  // server id -> its line
+  dds_time_t deadline = dds_time() + Seconds(o.timeout_s);
   for (dds_time_t now = dds_time(); now < deadline; now = dds_time()) {
     reader.WaitForData(deadline - now);
     dds_sample_info_t info;
     while (reader.Take(status.get(), &info)) {
-      if (!o.server_id.empty() && o.server_id != status->server_id) continue;
+      if (!info.valid_data) continue;
+      const std::string id = svc::ServerIdOf(status->server_id);
+      if (!o.server_id.empty() && o.server_id != id) continue;
       // source_timestamp is the server's wall clock: the age check assumes synchronised
       // clocks (same host in a HEALTHCHECK).
       const double age_s = static_cast<double>(dds_time() - info.source_timestamp) * 1e-9;
       if (o.max_age_s > 0 && age_s > o.max_age_s) continue;
-      if (!o.quiet) {
-        const auto& c = status->counters;
-        std::printf(
-            "hapco-status: server %s, domain %d, up %.1f s, %" PRIu32 " sessions, step p50 %.0f us "
-            "p99 %.0f us max %.0f us, status age %.3f s; bad input: nan %" PRIu64 ", workspace %" PRIu64
-            ", jumps %" PRIu64 ", out-of-order %" PRIu64 ", duplicates %" PRIu64
-            ", unknown clients %" PRIu64 ", floods %" PRIu64 "\n",
-            status->server_id, o.domain, static_cast<double>(status->uptime_ns) * 1e-9,
-            static_cast<uint32_t>(status->sessions), status->step_time_p50_us,
-            status->step_time_p99_us, status->step_time_max_us, age_s, c.bad_pose_nan,
-            c.out_of_workspace, c.position_jumps, c.out_of_order, c.duplicates,
-            c.unknown_clients, c.floods);
-      }
-      return 0;
+      const auto& c = status->counters;
+      char line[768];
+      std::snprintf(
+          line, sizeof(line),
+          "hapco-status: server %s, domain %d, up %.1f s, %" PRIu32 " of %" PRIu32 " sessions, scenes %s, step p50 "
+          "%.0f us p99 %.0f us max %.0f us, status age %.3f s; bad input: nan %" PRIu64 ", workspace %" PRIu64
+          ", jumps %" PRIu64 ", out-of-order %" PRIu64 ", duplicates %" PRIu64 ", unknown clients %" PRIu64
+          ", floods %" PRIu64,
+          id.c_str(), o.domain, static_cast<double>(status->uptime_ns) * 1e-9,
+          static_cast<uint32_t>(status->sessions), static_cast<uint32_t>(status->max_sessions),
+          status->scene_names[0] != '\0' ? status->scene_names : "?", status->step_time_p50_us,
+          status->step_time_p99_us, status->step_time_max_us, age_s, c.bad_pose_nan, c.out_of_workspace,
+          c.position_jumps, c.out_of_order, c.duplicates, c.unknown_clients, c.floods);
+      if (lines.empty()) deadline = std::min(deadline, dds_time() + Seconds(o.server_id.empty() ? kOthersWindowS : 0));
+      lines[id] = line;
     }
+  }
+  if (!lines.empty()) {
+    if (!o.quiet) {
+      for (const auto& [id, line] : lines) std::printf("%s\n", line.c_str());
+    }
+    return 0;
   }
   std::fprintf(stderr, "hapco-status: no%s server status in domain %d within %.1f s (check "
                "the server, --domain and CYCLONEDDS_URI peers)\n",

@@ -252,6 +252,13 @@ TEST(ServerFailover, ThreeServersServeEachClientOnceAndTakeOverTheClientsOfOneTh
     while (statuses.Take(&status)) announced.insert(ServerIdOf(status.server_id));
   }
   ASSERT_EQ(announced.size(), ids.size()) << ReadFile(dir + "/server-s1.err");
+  // hapco-status lists every server of the domain, one line each.
+  Process status_tool({HAPCO_STATUS_EXE, "--domain", domain}, dir + "/status.out", dir + "/status.err");
+  ASSERT_EQ(status_tool.Wait(60'000), 0) << ReadFile(dir + "/status.err");
+  for (const std::string& id : ids) {
+    EXPECT_NE(ReadFile(dir + "/status.out").find("server " + id + ", domain " + domain + ", up "), std::string::npos)
+        << ReadFile(dir + "/status.out");
+  }
   // A recorder of every session on every server (steps carry the server that made them).
   const std::string recording = dir + "/sessions.hapcorec";
   Process recorder({HAPCO_RECORDER_EXE, kScene, "--output", recording, "--domain", domain}, dir + "/recorder.out",
