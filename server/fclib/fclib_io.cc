@@ -2,6 +2,7 @@
 
 #include "fclib/fclib_c.h"
 #include <hdf5.h>
+#include <poll.h>
 #include <sys/prctl.h>
 #include <sys/socket.h>
 #include <sys/stat.h>
@@ -421,6 +422,9 @@ void CheckIsHdf5File(const std::string& path) {
 // whether the file is safe to parse here; the checks that count are the ones run here after.
 constexpr int kProbeRefused = 3;  // the worker's verdict when the checks threw InputError
 constexpr int kProbesPerWorker = 1000;
+// A file whose checks take longer is refused (HDF5 may loop on corrupt metadata). Generous: the
+// checks read every array once.
+constexpr int kProbeTimeoutMs = 20'000;
 
 void CheckEverythingInProcess(const std::string& path);
 
@@ -436,7 +440,18 @@ class ProbeWorker {
     if (socket_ < 0 && !Start()) return;
     const std::uint32_t length = static_cast<std::uint32_t>(path.size());
     char verdict = 0;
-    if (!SendAll(&length, sizeof(length)) || !SendAll(path.data(), path.size()) || !ReceiveVerdict(&verdict)) {
+    if (!SendAll(&length, sizeof(length)) || !SendAll(path.data(), path.size())) {
+      Stop();
+      HAPCO_ASSERT(false, "the FCLIB pre-check process ended before it was given the file");
+    }
+    if (!VerdictArrivesInTime()) {
+      // HDF5 loops on the file (or the worker hangs): a corrupt file must not hang the reader.
+      kill(pid_, SIGKILL);
+      Stop();
+      Fail(path, "HDF5 did not finish reading the file within " + std::to_string(kProbeTimeoutMs / 1000) +
+                     " s: refused as corrupt");
+    }
+    if (!ReceiveVerdict(&verdict)) {
       // The worker ended during this file: by a signal if HDF5 crashed on it.
       const int status = Stop();
       if (WIFSIGNALED(status)) {
@@ -473,8 +488,13 @@ class ProbeWorker {
   // The worker: one path in, one verdict byte out, until the parent closes its end.
   [[noreturn]] static void Serve(int socket) {
     prctl(PR_SET_PDEATHSIG, SIGKILL);
-    // A crash must end the worker by its signal, not in a sanitizer's or fuzzer's handler.
-    for (const int signal_number : {SIGSEGV, SIGBUS, SIGFPE, SIGILL}) std::signal(signal_number, SIG_DFL);
+    // A crash must end the worker by its signal, not in a sanitizer's or fuzzer's handler
+    // (SIGABRT too: an ASan report ends by abort() under abort_on_error, and libFuzzer's
+    // handler, inherited over fork, wrote bogus crash files and could deadlock in the child on
+    // a lock of a thread the child does not have: the long run stopped in a 15 s timeout).
+    for (const int signal_number : {SIGSEGV, SIGBUS, SIGFPE, SIGILL, SIGABRT, SIGTRAP}) {
+      std::signal(signal_number, SIG_DFL);
+    }
     std::string path;
     for (;;) {
       std::uint32_t length = 0;
@@ -505,6 +525,15 @@ class ProbeWorker {
     return true;
   }
   bool ReceiveVerdict(char* verdict) const { return ReceiveAll(socket_, verdict, 1); }
+  // True when the verdict (or the worker's end) arrives within kProbeTimeoutMs.
+  bool VerdictArrivesInTime() const {
+    pollfd ready{socket_, POLLIN, 0};
+    for (;;) {
+      const int n = poll(&ready, 1, kProbeTimeoutMs);
+      if (n < 0 && errno == EINTR) continue;
+      return n != 0;
+    }
+  }
   bool SendAll(const void* data, std::size_t size) const {
     const auto* bytes = static_cast<const char*>(data);
     while (size > 0) {
