@@ -420,6 +420,10 @@ void CheckIsHdf5File(const std::string& path) {
 // crashed is replaced at the next file; one that has probed kProbesPerWorker files too, so
 // library state left by earlier corrupt files cannot build up. Its verdict only decides
 // whether the file is safe to parse here; the checks that count are the ones run here after.
+// The sanitizer runtimes' hook (sanitizer/common_interface_defs.h), declared weak so that a
+// build without sanitizers links without it.
+extern "C" void __sanitizer_set_death_callback(void (*callback)(void)) __attribute__((weak));
+
 constexpr int kProbeRefused = 3;  // the worker's verdict when the checks threw InputError
 constexpr int kProbesPerWorker = 1000;
 // A file whose checks take longer is refused (HDF5 may loop on corrupt metadata). Generous: the
@@ -495,6 +499,9 @@ class ProbeWorker {
     for (const int signal_number : {SIGSEGV, SIGBUS, SIGFPE, SIGILL, SIGABRT, SIGTRAP}) {
       std::signal(signal_number, SIG_DFL);
     }
+    // Likewise a sanitizer's death callback (libFuzzer installs one that writes the unit it
+    // holds as a crash file: from the worker, a bogus one). Weak: absent outside sanitizer builds.
+    if (__sanitizer_set_death_callback != nullptr) __sanitizer_set_death_callback(nullptr);
     std::string path;
     for (;;) {
       std::uint32_t length = 0;

@@ -264,11 +264,12 @@ void ServerLoop::ProcessSessionControls() {
           it = sessions_.end();
         }
         if (it == sessions_.end()) {
-          OpenSession(id, *model);
+          if (Client* opened = OpenSession(id, *model)) opened->joined_client_time_ns = control.client_time_ns;
         } else if (control.client_time_ns > 0 && it->second.first_client_time_ns >= control.client_time_ns) {
           // Every pose this session took was sent after the JOIN: they are the stream this JOIN
           // starts (a client moved here and its first poses overtook its JOIN; DDS orders no
           // two topics). The session keeps them and its state.
+          it->second.joined_client_time_ns = control.client_time_ns;
         } else {
           // A restarted client (its sequence starts again): a fresh stream and scene state.
           it->second.session->Reset();
@@ -276,6 +277,7 @@ void ServerLoop::ProcessSessionControls() {
           it->second.newest_seen = 0;
           it->second.seen_any = false;
           it->second.first_client_time_ns = -1;
+          it->second.joined_client_time_ns = control.client_time_ns;
           Log(kLogSession, "session of '" + id + "' joined again: reset");
         }
         break;
@@ -335,8 +337,11 @@ void ServerLoop::ProcessPoses() {
     auto it = sessions_.find(id);
     if (!AddressedToMe(pose.server_id)) {
       ++counters_.poses_for_other_servers;  // another server's client: not bad input
-      if (it != sessions_.end() && pose.server_id[0] != '\0') {
-        // It moved (its JOIN elsewhere may not have reached this server): never answer twice.
+      // It moved (its JOIN elsewhere may not have reached this server): never answer twice. Only
+      // a pose sent after this session began says so: one of the stream before (addressed to
+      // the server it left, still in flight or in the reader's queue) must not end it.
+      if (it != sessions_.end() && pose.server_id[0] != '\0' &&
+          pose.client_time_ns > std::max(it->second.joined_client_time_ns, it->second.first_client_time_ns)) {
         ++counters_.sessions_moved_away;
         Log(kLogSession, "'" + id + "' is served by '" + ServerIdOf(pose.server_id) + "': its session here closes");
         CloseSession(it);

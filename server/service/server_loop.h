@@ -107,6 +107,8 @@ class ServerLoop {
     bool seen_any = false;
     // client_time_ns of the first pose queued since the session opened or was reset (-1: none).
     int64_t first_client_time_ns = -1;
+    // client_time_ns of the newest SESSION_JOIN this session took (-1: opened by a pose).
+    int64_t joined_client_time_ns = -1;
     // Filled by the stepping job, read by the server thread after the batch.
     PendingPoses stepped;
     std::array<int64_t, kMaxQueuedPoses> step_ns{};
