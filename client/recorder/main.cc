@@ -158,9 +158,11 @@ class Recorder {
     ClientState& c = clients_[frame.client_id];
     // A session starts again when its step counter does (re-opened) or when another server
     // steps the client (it moved after its server stopped answering: docs/several-servers.md).
-    const std::string server_id(frame.server_id, strnlen(frame.server_id, sizeof(frame.server_id)));
-    const bool new_session = c.have_frame && (frame.step <= c.last_step || server_id != c.server_id);
-    c.server_id = server_id;
+    // (Compared in place: no string built per frame.)
+    const std::size_t id_length = strnlen(frame.server_id, sizeof(frame.server_id));
+    const bool other_server = c.server_id.compare(0, std::string::npos, frame.server_id, id_length) != 0;
+    const bool new_session = c.have_frame && (frame.step <= c.last_step || other_server);
+    if (other_server) c.server_id.assign(frame.server_id, id_length);
     // Steps without a frame: a gap after the previous frame, or the steps before the first
     // frame of a session (the counter starts at 1; a recorder started mid-session counts the
     // steps it did not see).

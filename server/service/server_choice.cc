@@ -8,6 +8,8 @@
 #include <cstdio>
 #include <cstring>
 
+#include "service/pose_intake.h"
+
 namespace hapco::service {
 namespace {
 
@@ -49,7 +51,7 @@ bool Live(const ServerAnnouncement& server, int64_t now_ns, int64_t max_age_ns) 
 
 }  // namespace
 
-std::string ServerIdOf(const char (&field)[65]) { return std::string(field, strnlen(field, sizeof(field))); }
+std::string ServerIdOf(const char (&field)[65]) { return ClientIdOf(field); }  // the same bounded read
 
 ServerAnnouncement AnnouncementOf(const hapco_idl_ServerStatus& status, int64_t heard_ns) {
   ServerAnnouncement a;

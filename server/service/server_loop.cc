@@ -272,11 +272,7 @@ void ServerLoop::ProcessSessionControls() {
           it->second.joined_client_time_ns = control.client_time_ns;
         } else {
           // A restarted client (its sequence starts again): a fresh stream and scene state.
-          it->second.session->Reset();
-          it->second.queued.Clear();
-          it->second.newest_seen = 0;
-          it->second.seen_any = false;
-          it->second.first_client_time_ns = -1;
+          RestartStream(&it->second);
           it->second.joined_client_time_ns = control.client_time_ns;
           Log(kLogSession, "session of '" + id + "' joined again: reset");
         }
@@ -293,17 +289,21 @@ void ServerLoop::ProcessSessionControls() {
         break;
       case hapco_idl_SESSION_RESET:
         if (it != sessions_.end()) {
-          it->second.session->Reset();
-          it->second.queued.Clear();
-          it->second.newest_seen = 0;
-          it->second.seen_any = false;
-          it->second.first_client_time_ns = -1;
+          RestartStream(&it->second);
         }
         break;
       default:
         Log(kLogClient, "unknown session command from '" + id + "' ignored");
     }
   }
+}
+
+void ServerLoop::RestartStream(Client* client) {
+  client->session->Reset();
+  client->queued.Clear();
+  client->newest_seen = 0;
+  client->seen_any = false;
+  client->first_client_time_ns = -1;
 }
 
 void ServerLoop::Count(PoseVerdict verdict, const std::string& client_id) {

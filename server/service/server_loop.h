@@ -116,6 +116,8 @@ class ServerLoop {
   };
 
   void ProcessSessionControls();
+  // SESSION_RESET or a restarted client's JOIN: reference configuration, a new pose stream.
+  void RestartStream(Client* client);
   void ProcessPoses();
   // Queues the poses `pose` repeats (DevicePose.recent) that this client's session never got.
   void RecoverMissedPoses(Client* client, const hapco_idl_DevicePose& pose, int64_t receive_ns);
