@@ -19,6 +19,19 @@ if(HAPCO_WITH_FCLIB)
   pkg_check_modules(FCLIB REQUIRED IMPORTED_TARGET fclib)
 endif()
 
+# Gmsh's C++ API (gmsh.h, libgmsh; Debian ships no CMake config): an imported target by hand.
+if(HAPCO_WITH_GMSH AND NOT HAPCO_BUILD_FUZZERS)
+  find_path(GMSH_INCLUDE_DIR gmsh.h)
+  find_library(GMSH_LIBRARY gmsh)
+  if(NOT GMSH_INCLUDE_DIR OR NOT GMSH_LIBRARY)
+    message(FATAL_ERROR "Gmsh not found: apt-get install libgmsh-dev (scripts/install-deps), or -DHAPCO_WITH_GMSH=OFF")
+  endif()
+  add_library(hapco_gmsh INTERFACE)
+  add_library(Gmsh::gmsh ALIAS hapco_gmsh)
+  target_include_directories(hapco_gmsh SYSTEM INTERFACE ${GMSH_INCLUDE_DIR})
+  target_link_libraries(hapco_gmsh INTERFACE ${GMSH_LIBRARY})
+endif()
+
 # Siconos Numerics is optional: only the contact benchmark compares against it.
 find_path(SICONOS_NUMERICS_INCLUDE_DIR FrictionContactProblem.h PATH_SUFFIXES siconos/numerics)
 find_library(SICONOS_NUMERICS_LIBRARY siconos_numerics)

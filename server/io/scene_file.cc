@@ -3,14 +3,21 @@
 #include <google/protobuf/io/tokenizer.h>
 #include <google/protobuf/text_format.h>
 
+#include <algorithm>
 #include <cmath>
+#include <filesystem>
 #include <fstream>
+#include <iterator>
+#include <memory>
 #include <sstream>
 #include <string>
 #include <vector>
 
 #include "common/error.h"
 #include "scene.pb.h"
+#ifdef HAPCO_WITH_GMSH
+#include "mesh_import/gmsh_mesh.h"
+#endif
 
 namespace hapco::io {
 namespace {
@@ -89,7 +96,11 @@ class SceneChecker {
     spec.obstacle = CheckBody("obstacle", scene.obstacle(), Nested(tree_, scene, "obstacle"));
     // Before the body checks: without a driven face the tool would be reported as an
     // unsupported body ("no clamped and no driven face"), which hides the actual mistake.
-    if (scene.tool().driven_face() == pb::BOX_FACE_UNSPECIFIED) {
+    if (scene.tool().has_mesh() && scene.tool().mesh().driven_group().empty()) {
+      Fail("tool.mesh", scene.tool().mesh(), Nested(Nested(tree_, scene, "tool"), scene.tool(), "mesh"), "driven_group",
+           "is missing: the tool must have a physical group whose nodes follow the haptic device");
+    }
+    if (scene.tool().driven_face() == pb::BOX_FACE_UNSPECIFIED && !scene.tool().has_mesh()) {
       std::string where = source_;
       const FieldDescriptor* tool_field = scene.GetDescriptor()->FindFieldByName("tool");
       if (tree_ != nullptr && tool_field != nullptr) {
@@ -138,9 +149,16 @@ class SceneChecker {
     spec.name = body.name().empty() ? path : body.name();
     if (body.geometry_case() == pb::Body::kMeshFile) {
       Fail(path, body, tree, "mesh_file",
-           "imported meshes are not supported yet; describe the body with `box { ... }`");
+           "is not read; give a mesh as `mesh { file: \"" + body.mesh_file() +
+               "\" length_unit_m: 1 clamped_groups: \"...\" }` (docs/mesh-scenes.md)");
     }
-    if (!body.has_box()) Fail(path, body, tree, "box", "is missing (the body's geometry)");
+    if (body.has_mesh()) {
+      CheckElementOrder(path, body, tree, &spec);
+      CheckMaterial(path, body, tree, &spec);
+      CheckMeshBody(path, body, tree, &spec);
+      return spec;
+    }
+    if (!body.has_box()) Fail(path, body, tree, "box", "is missing (the body's geometry: `box { ... }` or `mesh { ... }`)");
     const pb::BoxGeometry& box = body.box();
     const auto* box_tree = Nested(tree, body, "box");
     const std::string box_path = path + ".box";
@@ -172,18 +190,44 @@ class SceneChecker {
     spec.box.divisions = Eigen::Vector3i(static_cast<int>(divisions[0]),
                                          static_cast<int>(divisions[1]),
                                          static_cast<int>(divisions[2]));
-    switch (body.element_order()) {
-      case pb::TET4: spec.box.order = fem::ElementOrder::kTet4; break;
-      case pb::TET10: spec.box.order = fem::ElementOrder::kTet10; break;
-      default:
-        Fail(path, body, tree, "element_order", "must be TET4 or TET10");
-    }
+    CheckElementOrder(path, body, tree, &spec);
     // Refused here, before anything is allocated: a server would otherwise grow to many GB
     // (or be killed) while building the body.
     const sim::BodyBuildEstimate estimate = sim::EstimateBodyBuild(spec.box);
     if (estimate.bytes > sim::kMaxBodyBuildBytes) {
       Fail(box_path, box, box_tree, "divisions_x", sim::DescribeOverLimit(spec.box, estimate));
     }
+    CheckMaterial(path, body, tree, &spec);
+    for (int index = 0; index < body.clamped_faces_size(); ++index) {
+      if (body.clamped_faces(index) == pb::BOX_FACE_UNSPECIFIED) {
+        Fail(path, body, tree, "clamped_faces", "must name a face (X_MIN ... Z_MAX)", index);
+      }
+      spec.clamped_faces.push_back(ToFace(body.clamped_faces(index)));
+    }
+    if (body.driven_face() != pb::BOX_FACE_UNSPECIFIED) {
+      spec.driven_face = ToFace(body.driven_face());
+    }
+    if (spec.clamped_faces.empty() && !spec.driven_face) {
+      Fail(path, body, tree, "clamped_faces",
+           "the body has no clamped and no driven face: its stiffness is singular (it can move "
+           "freely); add `clamped_faces: X_MIN` or a `driven_face`");
+    }
+    return spec;
+  }
+
+  void CheckElementOrder(const std::string& path, const pb::Body& body, const TextFormat::ParseInfoTree* tree,
+                         sim::BodySpec* spec) const {
+    switch (body.element_order()) {
+      case pb::TET4: spec->box.order = fem::ElementOrder::kTet4; break;
+      case pb::TET10: spec->box.order = fem::ElementOrder::kTet10; break;
+      default:
+        Fail(path, body, tree, "element_order", "must be TET4 or TET10");
+    }
+  }
+
+  void CheckMaterial(const std::string& path, const pb::Body& body, const TextFormat::ParseInfoTree* tree,
+                     sim::BodySpec* out) const {
+    sim::BodySpec& spec = *out;
     if (!body.has_material()) Fail(path, body, tree, "material", "is missing");
     const pb::Material& material = body.material();
     const auto* material_tree = Nested(tree, body, "material");
@@ -201,21 +245,107 @@ class SceneChecker {
                Number(material.poisson_ratio()));
     }
     spec.material = {material.youngs_modulus_pa(), material.poisson_ratio()};
-    for (int index = 0; index < body.clamped_faces_size(); ++index) {
-      if (body.clamped_faces(index) == pb::BOX_FACE_UNSPECIFIED) {
-        Fail(path, body, tree, "clamped_faces", "must name a face (X_MIN ... Z_MAX)", index);
+  }
+
+  // A mesh body: Gmsh reads (or meshes) the file; its named groups become the node sets.
+  void CheckMeshBody(const std::string& path, const pb::Body& body, const TextFormat::ParseInfoTree* tree,
+                     sim::BodySpec* spec) const {
+    const pb::MeshGeometry& mesh = body.mesh();
+    const auto* mesh_tree = Nested(tree, body, "mesh");
+    const std::string mesh_path = path + ".mesh";
+    if (mesh.file().empty()) Fail(mesh_path, mesh, mesh_tree, "file", "is missing (a .msh or .geo file)");
+    if (!(mesh.length_unit_m() > 0.0 && mesh.length_unit_m() <= 1e3)) {
+      Fail(mesh_path, mesh, mesh_tree, "length_unit_m",
+           "must be the metres per length unit of the file, in (0, 1000] (1 for metres, 0.001 for mm), got " +
+               Number(mesh.length_unit_m()));
+    }
+    const Eigen::Vector3d offset(mesh.offset_m().x(), mesh.offset_m().y(), mesh.offset_m().z());
+    if (!offset.allFinite() || offset.cwiseAbs().maxCoeff() > kMaxExtentM) {
+      Fail(mesh_path, mesh, mesh_tree, "offset_m",
+           "every coordinate must be finite and within " + Number(kMaxExtentM) + " m of the origin");
+    }
+    if (!(mesh.mesh_size() >= 0.0) || !std::isfinite(mesh.mesh_size())) {
+      Fail(mesh_path, mesh, mesh_tree, "mesh_size", "must be a finite length >= 0, got " + Number(mesh.mesh_size()));
+    }
+    if (body.clamped_faces_size() > 0 || body.driven_face() != pb::BOX_FACE_UNSPECIFIED) {
+      Fail(path, body, tree, body.clamped_faces_size() > 0 ? "clamped_faces" : "driven_face",
+           "is for box bodies; a mesh body names its node sets with mesh.clamped_groups and mesh.driven_group",
+           body.clamped_faces_size() > 0 ? 0 : -1);
+    }
+    if (mesh.clamped_groups_size() == 0 && mesh.driven_group().empty()) {
+      Fail(mesh_path, mesh, mesh_tree, "clamped_groups",
+           "the body has no clamped and no driven group: its stiffness is singular (it can move freely); "
+           "name a physical group of the file in `clamped_groups` (or `driven_group` for the tool)");
+    }
+#ifdef HAPCO_WITH_GMSH
+    namespace fs = std::filesystem;
+    fs::path file(mesh.file());
+    if (file.is_relative()) file = fs::path(source_).parent_path() / file;
+    mesh_import::MeshRequest request;
+    request.path = file.lexically_normal().string();
+    request.order = spec->box.order;
+    request.length_unit_m = mesh.length_unit_m();
+    request.mesh_size = mesh.mesh_size();
+    request.offset_m = offset;
+    mesh_import::ImportedMesh imported;
+    try {
+      imported = mesh_import::ImportMesh(request);
+    } catch (const InputError& error) {
+      Fail(mesh_path, mesh, mesh_tree, "file", error.what());
+    }
+    auto body_mesh = std::make_shared<sim::MeshBody>();
+    body_mesh->source = request.path;
+    const auto group = [&](const std::string& name, const char* field, int index) -> const std::vector<int>& {
+      const auto found = imported.group_nodes.find(name);
+      if (found == imported.group_nodes.end()) {
+        std::string known;
+        for (const auto& [known_name, nodes] : imported.group_nodes) known += (known.empty() ? "" : ", ") + known_name;
+        Fail(mesh_path, mesh, mesh_tree, field,
+             "physical group '" + name + "' is not in " + request.path +
+                 (known.empty() ? " (it has no physical groups)" : " (it has: " + known + ")"),
+             index);
       }
-      spec.clamped_faces.push_back(ToFace(body.clamped_faces(index)));
+      if (found->second.empty()) {
+        Fail(mesh_path, mesh, mesh_tree, field, "physical group '" + name + "' holds no node of the tetrahedra", index);
+      }
+      return found->second;
+    };
+    const auto merge = [](std::vector<int>* into, const std::vector<int>& nodes) {
+      std::vector<int> merged;
+      std::set_union(into->begin(), into->end(), nodes.begin(), nodes.end(), std::back_inserter(merged));
+      *into = std::move(merged);
+    };
+    for (int index = 0; index < mesh.clamped_groups_size(); ++index) {
+      merge(&body_mesh->clamped_nodes, group(mesh.clamped_groups(index), "clamped_groups", index));
     }
-    if (body.driven_face() != pb::BOX_FACE_UNSPECIFIED) {
-      spec.driven_face = ToFace(body.driven_face());
+    if (!mesh.driven_group().empty()) body_mesh->driven_nodes = group(mesh.driven_group(), "driven_group", -1);
+    for (int index = 0; index < mesh.contact_groups_size(); ++index) {
+      merge(&body_mesh->contact_nodes, group(mesh.contact_groups(index), "contact_groups", index));
     }
-    if (spec.clamped_faces.empty() && !spec.driven_face) {
-      Fail(path, body, tree, "clamped_faces",
-           "the body has no clamped and no driven face: its stiffness is singular (it can move "
-           "freely); add `clamped_faces: X_MIN` or a `driven_face`");
+    const sim::BodyBuildEstimate estimate = sim::EstimateMeshBuild(imported.mesh);
+    if (estimate.bytes > sim::kMaxBodyBuildBytes) {
+      Fail(mesh_path, mesh, mesh_tree, "file", request.path + ": " + sim::DescribeOverLimit(imported.mesh, estimate));
     }
-    return spec;
+    std::ostringstream summary;
+    summary << request.path;
+    if (imported.meshed_file != request.path) {
+      summary << " (meshed at " << mesh.mesh_size() << " file units" << (imported.from_cache ? ", from the cache" : "") << ")";
+    }
+    const auto names = [](const google::protobuf::RepeatedPtrField<std::string>& groups) {
+      std::string text;
+      for (const std::string& name : groups) text += (text.empty() ? "" : " ") + name;
+      return text.empty() ? std::string("-") : text;
+    };
+    summary << "; clamped: " << names(mesh.clamped_groups()) << ", driven: "
+            << (mesh.driven_group().empty() ? "-" : mesh.driven_group())
+            << ", contact: " << (mesh.contact_groups_size() == 0 ? "whole boundary" : names(mesh.contact_groups()));
+    body_mesh->summary = summary.str();
+    body_mesh->mesh = std::move(imported.mesh);
+    spec->mesh = std::move(body_mesh);
+#else
+    Fail(mesh_path, mesh, mesh_tree, "file",
+         "this HapCo was built without Gmsh (HAPCO_WITH_GMSH=OFF): mesh bodies need a build with libgmsh-dev");
+#endif
   }
 
   void CheckContact(const pb::Scene& scene, sim::SceneSpec* spec) const {

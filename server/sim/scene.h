@@ -2,6 +2,7 @@
 // A scene in plain C++ types (no file format): two elastic bodies, contact, solver settings
 // and the device trajectory (algorithms.md §1). io/scene_file.h reads it from a scene file.
 #include <Eigen/Dense>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -12,12 +13,25 @@
 
 namespace hapco::sim {
 
+// A body from an imported mesh (io reads it with mesh_import): nodes in m, node sets as ids.
+struct MeshBody {
+  std::string source;  // the file it came from, for messages
+  // One line for tools' reports: file, how it was meshed, the groups used.
+  std::string summary;
+  fem::Mesh mesh;
+  std::vector<int> clamped_nodes;  // sorted; fixed
+  std::vector<int> driven_nodes;   // sorted; follow the device translation
+  std::vector<int> contact_nodes;  // sorted; faces with all corners here may touch (empty: all)
+};
+
 struct BodySpec {
   std::string name;
-  fem::BoxMeshSpec box;
+  fem::BoxMeshSpec box;  // the geometry unless `mesh` is set (then only box.order is used)
   fem::Material material;
-  std::vector<fem::BoxFace> clamped_faces;   // fixed nodes
-  std::optional<fem::BoxFace> driven_face;   // nodes that follow the device translation
+  std::vector<fem::BoxFace> clamped_faces;   // box bodies: fixed nodes
+  std::optional<fem::BoxFace> driven_face;   // box bodies: nodes that follow the device
+  // Set for a mesh body (shared: scenes are copied, meshes can be large).
+  std::shared_ptr<const MeshBody> mesh;
 };
 
 // `steps` equal device increments that add up to `displacement_m`.
@@ -62,6 +76,12 @@ struct BodyBuildEstimate {
   double bytes = 0.0;  // peak resident bytes of BuildBody, approximately
 };
 BodyBuildEstimate EstimateBodyBuild(const fem::BoxMeshSpec& box);
+// The same for a mesh from its node count and bounding box: CHOLMOD's fill follows the
+// equivalent box (same node count, same aspect ratios), which holds for the convex, compact
+// bodies of haptic scenes; a long thin mesh is estimated high, never low.
+BodyBuildEstimate EstimateMeshBuild(const fem::Mesh& mesh);
+// "12000 nodes (Tet10) would need about N GiB to build, more than ...".
+std::string DescribeOverLimit(const fem::Mesh& mesh, const BodyBuildEstimate& estimate);
 // "400 x 80 x 80 Tet4 cells (2627721 nodes) would need about N GiB to build, more than ...".
 std::string DescribeOverLimit(const fem::BoxMeshSpec& box, const BodyBuildEstimate& estimate);
 
@@ -75,8 +95,9 @@ inline constexpr long long kMaxTrajectorySteps = 100'000'000;
 // Largest Coulomb coefficient a scene (and hapco-sim --mu) accepts, dimensionless.
 inline constexpr double kMaxFrictionCoefficient = 10.0;
 
-// Meshes the body's box, gathers its Dirichlet nodes and factors its stiffness (once).
-// Throws InputError, before allocating, when EstimateBodyBuild exceeds kMaxBodyBuildBytes.
+// Meshes the body's box (or takes its imported mesh), gathers its Dirichlet nodes and factors
+// its stiffness (once). Throws InputError, before allocating, when the estimate exceeds
+// kMaxBodyBuildBytes.
 fem::ElasticBody BuildBody(const BodySpec& body);
 
 }  // namespace hapco::sim

@@ -138,6 +138,14 @@ void ComputeCompliance(const fem::ElasticBody& body, ContactSurface* surface) {
   }
 }
 
+// A mesh body's contact groups restrict its candidate faces to those with every corner in them.
+bool OnContactSurface(const BodySpec& body, const fem::SurfaceTriangle& triangle) {
+  if (body.mesh == nullptr || body.mesh->contact_nodes.empty()) return true;
+  const std::vector<int>& nodes = body.mesh->contact_nodes;
+  return std::all_of(triangle.corners.begin(), triangle.corners.end(),
+                     [&](int corner) { return std::binary_search(nodes.begin(), nodes.end(), corner); });
+}
+
 }  // namespace
 
 TwoBodyModel::TwoBodyModel(SceneSpec scene, std::size_t max_operator_bytes)
@@ -164,7 +172,8 @@ TwoBodyModel::TwoBodyModel(SceneSpec scene, std::size_t max_operator_bytes)
       lo = lo.cwiseMin(Position(obstacle_mesh, corner));
       hi = hi.cwiseMax(Position(obstacle_mesh, corner));
     }
-    if ((hi.array() >= reach_min.array()).all() && (lo.array() <= reach_max.array()).all()) {
+    if ((hi.array() >= reach_min.array()).all() && (lo.array() <= reach_max.array()).all() &&
+        OnContactSurface(scene_.obstacle, triangle)) {
       reachable.push_back(triangle);
     }
   }
@@ -175,7 +184,14 @@ TwoBodyModel::TwoBodyModel(SceneSpec scene, std::size_t max_operator_bytes)
     throw InputError(message.str());
   }
   obstacle_surface_ = DescribeSurface(obstacle_mesh, std::move(reachable));
-  tool_surface_ = DescribeSurface(tool_mesh, fem::BoundaryTriangles(tool_mesh));
+  std::vector<fem::SurfaceTriangle> tool_faces;
+  for (const fem::SurfaceTriangle& triangle : fem::BoundaryTriangles(tool_mesh)) {
+    if (OnContactSurface(scene_.tool, triangle)) tool_faces.push_back(triangle);
+  }
+  if (tool_faces.empty()) {
+    throw InputError("the tool's contact groups hold no boundary face of the tool: name a surface group of its boundary");
+  }
+  tool_surface_ = DescribeSurface(tool_mesh, std::move(tool_faces));
   for (std::size_t i = 0; i < obstacle_surface_.nodes.size(); ++i) {
     if (obstacle_surface_.on_sharp_edge[i]) {
       obstacle_edge_nodes_.push_back(obstacle_surface_.nodes[i]);

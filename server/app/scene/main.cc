@@ -57,17 +57,29 @@ void PrintBody(const char* role, const hapco::sim::BodySpec& spec,
                const hapco::fem::ElasticBody& body) {
   const auto& box = spec.box;
   const auto& stats = body.stats();
-  std::printf("%-9s %s: box %.4g x %.4g x %.4g m, %s, %d x %d x %d cells\n", role,
-              spec.name.c_str(), box.size_m.x(), box.size_m.y(), box.size_m.z(),
-              hapco::fem::ToString(box.order), box.divisions.x(), box.divisions.y(),
-              box.divisions.z());
+  if (spec.mesh != nullptr) {
+    const auto& nodes = body.mesh().nodes_m;
+    const Eigen::Vector3d extent = (nodes.colwise().maxCoeff() - nodes.colwise().minCoeff()).transpose();
+    std::printf("%-9s %s: mesh %s, bounding box %.4g x %.4g x %.4g m\n", role, spec.name.c_str(),
+                hapco::fem::ToString(body.mesh().order), extent.x(), extent.y(), extent.z());
+    std::printf("          %s\n", spec.mesh->summary.c_str());
+  } else {
+    std::printf("%-9s %s: box %.4g x %.4g x %.4g m, %s, %d x %d x %d cells\n", role,
+                spec.name.c_str(), box.size_m.x(), box.size_m.y(), box.size_m.z(),
+                hapco::fem::ToString(box.order), box.divisions.x(), box.divisions.y(),
+                box.divisions.z());
+  }
   std::printf("          %d nodes, %d elements, %d dofs (%d free); E = %.4g MPa, nu = %.3g\n",
               body.mesh().num_nodes(), body.mesh().num_elements(), body.num_dofs(),
               body.num_free_dofs(), spec.material.youngs_modulus_pa * 1e-6,
               spec.material.poisson_ratio);
-  std::printf("          clamped faces:%s; driven face: %s (%zu clamped, %zu driven nodes)\n",
-              Faces(spec).c_str(), spec.driven_face ? FaceName(*spec.driven_face) : "none",
-              body.clamped_nodes().size(), body.driven_nodes().size());
+  if (spec.mesh != nullptr) {
+    std::printf("          %zu clamped, %zu driven nodes\n", body.clamped_nodes().size(), body.driven_nodes().size());
+  } else {
+    std::printf("          clamped faces:%s; driven face: %s (%zu clamped, %zu driven nodes)\n",
+                Faces(spec).c_str(), spec.driven_face ? FaceName(*spec.driven_face) : "none",
+                body.clamped_nodes().size(), body.driven_nodes().size());
+  }
   std::printf("          K nonzeros %ld, Cholesky factor nonzeros %ld; assembly %.3f s, "
               "factorization %.3f s\n",
               stats.stiffness_nonzeros, stats.factor_nonzeros, stats.assembly_seconds,

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cstdlib>
 #include <fstream>
 #include <sstream>
 
@@ -236,6 +237,94 @@ TEST(SceneFileTest, MissingFileIsAClearError) {
   } catch (const InputError& error) {
     EXPECT_NE(std::string(error.what()).find("cannot open"), std::string::npos);
   }
+}
+
+
+// ---- Mesh bodies (Gmsh .geo/.msh; docs/mesh-scenes.md) ---------------------------------------
+
+const std::string kOrganTip = std::string(HAPCO_SOURCE_DIR) + "/proto/scenes/organ_tip.txtpb";
+const std::string kOrganPair = std::string(HAPCO_SOURCE_DIR) + "/proto/scenes/organ_pair.txtpb";
+
+// Meshed .geo files go to a cache of this test's own, not the user's ~/.cache.
+class MeshSceneTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    cache_ = std::string(::testing::TempDir()) + "hapco-scene-file-test-cache";
+    setenv("XDG_CACHE_HOME", cache_.c_str(), 1);
+  }
+  // Parses the organ_tip text with one unique substring replaced, as if it were the shipped
+  // file (relative mesh paths resolve from proto/scenes/); "" when it loads.
+  static std::string OrganTipErrorWith(const std::string& from, const std::string& to) {
+    std::string text = ReadFile(kOrganTip);
+    const auto at = text.find(from);
+    EXPECT_NE(at, std::string::npos) << from;
+    EXPECT_EQ(text.find(from, at + 1), std::string::npos) << from << " is not unique";
+    try {
+      ParseSceneText(text.replace(at, from.size(), to), kOrganTip);
+    } catch (const InputError& error) {
+      return error.what();
+    }
+    return "";
+  }
+  static std::string cache_;
+};
+std::string MeshSceneTest::cache_;
+
+TEST_F(MeshSceneTest, ShippedOrganScenesLoadWithTheNodeSetsTheirGeometryDefines) {
+  for (const std::string& path : {kOrganTip, kOrganPair}) {
+    const sim::SceneSpec scene = LoadSceneFile(path);
+    ASSERT_NE(scene.obstacle.mesh, nullptr) << path;
+    ASSERT_NE(scene.tool.mesh, nullptr) << path;
+    const fem::Mesh& organ = scene.obstacle.mesh->mesh;
+    // organ.geo: lengths in mm, the clamped base is the plane z = 0, the dome reaches 15 mm.
+    EXPECT_NEAR(organ.nodes_m.col(2).maxCoeff(), 0.015, 1e-9) << path;
+    EXPECT_NEAR(organ.nodes_m.col(0).maxCoeff() - organ.nodes_m.col(0).minCoeff(), 0.080, 1e-9) << path;
+    ASSERT_FALSE(scene.obstacle.mesh->clamped_nodes.empty());
+    for (int node : scene.obstacle.mesh->clamped_nodes) EXPECT_NEAR(organ.nodes_m(node, 2), 0.0, 1e-12);
+    // The contact group (the skin) has every boundary node but those only on the base.
+    EXPECT_GT(scene.obstacle.mesh->contact_nodes.size(), scene.obstacle.mesh->clamped_nodes.size());
+    // The tool's driven group is its flat top (instrument_tip.geo z = 39.2 mm, small_organ.geo
+    // z = 24.2 mm): one plane, the highest of the tool.
+    const fem::Mesh& tool = scene.tool.mesh->mesh;
+    ASSERT_FALSE(scene.tool.mesh->driven_nodes.empty());
+    for (int node : scene.tool.mesh->driven_nodes) {
+      EXPECT_NEAR(tool.nodes_m(node, 2), tool.nodes_m.col(2).maxCoeff(), 1e-12) << path;
+    }
+  }
+}
+
+TEST_F(MeshSceneTest, MissingPhysicalGroupIsNamedWithTheGroupsTheFileHas) {
+  const std::string message = OrganTipErrorWith("clamped_groups: \"base\"", "clamped_groups: \"bottom\"");
+  const std::string text = ReadFile(kOrganTip);
+  const int line = 1 + static_cast<int>(std::count(text.begin(), text.begin() + static_cast<long>(text.find("clamped_groups")), '\n'));
+  EXPECT_NE(message.find("organ_tip.txtpb:" + std::to_string(line) +
+                         ": obstacle.mesh.clamped_groups: physical group 'bottom' is not in"),
+            std::string::npos)
+      << message;
+  EXPECT_NE(message.find("(it has: base, organ, skin)"), std::string::npos) << message;
+}
+
+TEST_F(MeshSceneTest, MeshFileIsResolvedFromTheSceneFolderAndAMissingOneIsNamed) {
+  const std::string message = OrganTipErrorWith("meshes/organ.geo", "meshes/liver.geo");
+  EXPECT_NE(message.find("obstacle.mesh.file: "), std::string::npos) << message;
+  EXPECT_NE(message.find("proto/scenes/meshes/liver.geo: does not exist"), std::string::npos) << message;
+}
+
+TEST_F(MeshSceneTest, BoxFacesOnAMeshBodyAndAToolWithoutDrivenGroupAreRefused) {
+  std::string message = OrganTipErrorWith("  element_order: TET10\n", "  element_order: TET10\n  clamped_faces: Z_MIN\n");
+  EXPECT_NE(message.find("obstacle.clamped_faces: is for box bodies"), std::string::npos) << message;
+  message = OrganTipErrorWith("    driven_group: \"handle\"\n", "");
+  EXPECT_NE(message.find("tool.mesh.driven_group: is missing"), std::string::npos) << message;
+  message = OrganTipErrorWith("    clamped_groups: \"base\"\n", "");
+  EXPECT_NE(message.find("obstacle.mesh.clamped_groups: the body has no clamped and no driven group"), std::string::npos)
+      << message;
+  message = OrganTipErrorWith("    length_unit_m: 0.001\n    mesh_size: 4 ", "    mesh_size: 4 ");
+  EXPECT_NE(message.find("obstacle.mesh.length_unit_m: must be the metres per length unit"), std::string::npos) << message;
+}
+
+TEST_F(MeshSceneTest, TheFirstWavesMeshFileFieldPointsToTheMeshBlock) {
+  const std::string message = ErrorOf("format_version: 1\nobstacle { mesh_file: \"bar.msh\" }\ntool { }\n");
+  EXPECT_NE(message.find("is not read; give a mesh as `mesh { file: \"bar.msh\""), std::string::npos) << message;
 }
 
 }  // namespace

@@ -1,0 +1,419 @@
+#include "mesh_import/gmsh_mesh.h"
+
+#include <gmsh.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <mutex>
+#include <numeric>
+#include <sstream>
+#include <unordered_map>
+
+#include "common/error.h"
+
+namespace hapco::mesh_import {
+namespace {
+
+namespace fs = std::filesystem;
+
+// A .msh larger than this is refused before Gmsh reads it (Gmsh holds several times the file
+// in memory), bytes.
+constexpr std::uintmax_t kMaxMeshFileBytes = std::uintmax_t{2} << 30;
+// Corner nodes per (mesh size)^3 of bounding-box volume in a Gmsh Delaunay mesh: ~0.7 measured
+// (sphere, cylinder, ellipsoid at 3 sizes); 1.5 leaves room for local refinement.
+constexpr double kCornerNodesPerCell = 1.5;
+// Tet10 node count per corner node (corners + one midside per edge; ~7 edges per node / 2 + 1,
+// measured 4.6-5.3 on the same meshes).
+constexpr double kTet10NodesPerCorner = 6.0;
+
+[[noreturn]] void Fail(const std::string& path, const std::string& what) { throw InputError(path + ": " + what); }
+
+std::string Lower(std::string text) {
+  std::transform(text.begin(), text.end(), text.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  return text;
+}
+
+std::string ReadWholeFile(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) Fail(path, "cannot be read (permissions?)");
+  std::ostringstream text;
+  text << in.rdbuf();
+  return text.str();
+}
+
+// FNV-1a, 64 bit: a cache key for a .geo and its meshing options, not a security boundary (a
+// collision would only make the cache return another file's mesh, which the group and size
+// checks would then see; the key also names the Gmsh version).
+std::uint64_t Fnv1a(const std::string& bytes, std::uint64_t hash = 1469598103934665603ULL) {
+  for (unsigned char c : bytes) {
+    hash ^= c;
+    hash *= 1099511628211ULL;
+  }
+  return hash;
+}
+
+// Gmsh writes its messages to a logger we start per import; the first "Error" is the user's.
+class GmshSession {
+ public:
+  GmshSession() : lock_(Mutex()) {
+    static bool initialized = false;
+    if (initialized && Broken()) {
+      // A Gmsh error unwinds out of its parser or mesher and leaves state behind (the next
+      // .geo read finds an empty model): start a fresh Gmsh instead.
+      gmsh::finalize();
+      initialized = false;
+    }
+    if (!initialized) {
+      gmsh::initialize(0, nullptr, /*readConfigFiles=*/false);
+      gmsh::option::setNumber("General.Terminal", 0);  // no output on the server's stdout
+      gmsh::option::setNumber("General.NumThreads", 1);
+      initialized = true;
+      Broken() = false;
+    }
+    gmsh::clear();
+    gmsh::logger::start();
+  }
+  // Called when a Gmsh call threw: the next session restarts Gmsh.
+  void MarkBroken() { Broken() = true; }
+  ~GmshSession() {
+    gmsh::logger::stop();
+    gmsh::clear();  // free the model's memory
+  }
+  GmshSession(const GmshSession&) = delete;
+  GmshSession& operator=(const GmshSession&) = delete;
+
+  // Throws InputError with Gmsh's first error message, if it logged one since the last call.
+  void ThrowOnError(const std::string& path, const std::string& doing) {
+    std::vector<std::string> log;
+    gmsh::logger::get(log);
+    gmsh::logger::stop();
+    gmsh::logger::start();
+    for (const std::string& line : log) {
+      if (line.rfind("Error", 0) == 0) {
+        std::string message = line.substr(line.find(':') == std::string::npos ? 0 : line.find(':') + 1);
+        while (!message.empty() && message.front() == ' ') message.erase(message.begin());
+        Fail(path, "Gmsh could not " + doing + ": " + message);
+      }
+    }
+  }
+
+ private:
+  static bool& Broken() {
+    static bool broken = false;
+    return broken;
+  }
+  static std::mutex& Mutex() {
+    static std::mutex mutex;
+    return mutex;
+  }
+  std::lock_guard<std::mutex> lock_;
+};
+
+// Gmsh's local node order of a tetrahedron type -> fem::Mesh's (VTK) order: position k of the
+// result is the Gmsh local index of fem node k. Derived from Gmsh's own reference coordinates
+// (getElementProperties), not from a table: corners are the reference vertices, a midside is
+// the midpoint of two of them.
+std::vector<int> GmshToFemOrder(int gmsh_type, fem::ElementOrder order) {
+  std::string name;
+  int dim = 0, element_order = 0, num_nodes = 0, num_primary = 0;
+  std::vector<double> local;
+  gmsh::model::mesh::getElementProperties(gmsh_type, name, dim, element_order, num_nodes, local, num_primary);
+  HAPCO_ASSERT(dim == 3 && num_nodes == fem::NodesPerElement(order), "Gmsh tetrahedron type with an unexpected layout");
+  const std::array<Eigen::Vector3d, 4> corners = {Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(1, 0, 0),
+                                                  Eigen::Vector3d(0, 1, 0), Eigen::Vector3d(0, 0, 1)};
+  std::vector<Eigen::Vector3d> wanted(corners.begin(), corners.end());
+  if (order == fem::ElementOrder::kTet10) {
+    for (const auto& edge : fem::kTet10EdgeCorners) {
+      wanted.push_back(0.5 * (corners[static_cast<std::size_t>(edge[0])] + corners[static_cast<std::size_t>(edge[1])]));
+    }
+  }
+  std::vector<int> gmsh_index(wanted.size(), -1);
+  for (std::size_t k = 0; k < wanted.size(); ++k) {
+    for (int g = 0; g < num_nodes; ++g) {
+      const Eigen::Vector3d x(local[3 * static_cast<std::size_t>(g)], local[3 * static_cast<std::size_t>(g) + 1],
+                              local[3 * static_cast<std::size_t>(g) + 2]);
+      if ((x - wanted[k]).norm() < 1e-9) gmsh_index[k] = g;
+    }
+    HAPCO_ASSERT(gmsh_index[k] >= 0, "Gmsh tetrahedron node layout not understood");
+  }
+  return gmsh_index;
+}
+
+std::string ElementTypeName(int type) {
+  std::string name;
+  int dim = 0, order = 0, num_nodes = 0, num_primary = 0;
+  std::vector<double> local;
+  gmsh::model::mesh::getElementProperties(type, name, dim, order, num_nodes, local, num_primary);
+  return name + " (type " + std::to_string(type) + ")";
+}
+
+// Meshes the .geo now open in Gmsh, after estimating the node count from its bounding box.
+void MeshGeo(const MeshRequest& request, GmshSession* session) {
+  double x0 = 0, y0 = 0, z0 = 0, x1 = 0, y1 = 0, z1 = 0;
+  gmsh::model::getBoundingBox(-1, -1, x0, y0, z0, x1, y1, z1);
+  const double volume = std::max(x1 - x0, 0.0) * std::max(y1 - y0, 0.0) * std::max(z1 - z0, 0.0);
+  const double h = request.mesh_size;
+  double nodes = kCornerNodesPerCell * volume / (h * h * h);
+  if (request.order == fem::ElementOrder::kTet10) nodes *= kTet10NodesPerCorner;
+  if (!(nodes <= static_cast<double>(request.max_nodes))) {
+    std::ostringstream message;
+    message << "meshing with mesh_size " << h << " would make about " << static_cast<long long>(std::min(nodes, 1e18))
+            << " nodes (bounding box " << x1 - x0 << " x " << y1 - y0 << " x " << z1 - z0
+            << " file units), more than the " << request.max_nodes << " allowed; use a larger mesh_size";
+    Fail(request.path, message.str());
+  }
+  gmsh::option::setNumber("Mesh.MeshSizeMax", h);
+  gmsh::model::mesh::generate(3);
+  session->ThrowOnError(request.path, "mesh it");
+  if (request.order == fem::ElementOrder::kTet10) {
+    gmsh::model::mesh::setOrder(2);
+    session->ThrowOnError(request.path, "make its mesh quadratic");
+  }
+}
+
+// Small disjoint-set forest over node ids: the mesh's connected pieces.
+int Root(std::vector<int>& parent, int i) {
+  while (parent[static_cast<std::size_t>(i)] != i) {
+    parent[static_cast<std::size_t>(i)] = parent[static_cast<std::size_t>(parent[static_cast<std::size_t>(i)])];
+    i = parent[static_cast<std::size_t>(i)];
+  }
+  return i;
+}
+
+ImportedMesh ImportMeshWithGmsh(const MeshRequest& request, GmshSession* session);
+
+}  // namespace
+
+int GmshTetrahedronType(fem::ElementOrder order) { return order == fem::ElementOrder::kTet10 ? 11 : 4; }
+
+std::string DefaultCacheDirectory() {
+  if (const char* xdg = std::getenv("XDG_CACHE_HOME"); xdg != nullptr && *xdg != '\0') {
+    return std::string(xdg) + "/hapco/meshes";
+  }
+  if (const char* home = std::getenv("HOME"); home != nullptr && *home != '\0') {
+    return std::string(home) + "/.cache/hapco/meshes";
+  }
+  return {};
+}
+
+ImportedMesh ImportMesh(const MeshRequest& request) {
+  GmshSession session;
+  try {
+    return ImportMeshWithGmsh(request, &session);
+  } catch (const InputError&) {
+    throw;
+  } catch (const std::bad_alloc&) {
+    session.MarkBroken();
+    Fail(request.path, "ran out of memory while Gmsh read or meshed it");
+  } catch (...) {
+    session.MarkBroken();
+    // Gmsh's API throws (a string) after logging an error: a syntax error in a .geo, an
+    // unwritable output, an internal failure. Its log has the message.
+    session.ThrowOnError(request.path, "read it");
+    Fail(request.path, "Gmsh failed without a message");
+  }
+}
+
+namespace {
+
+ImportedMesh ImportMeshWithGmsh(const MeshRequest& request, GmshSession* session_pointer) {
+  const std::string& path = request.path;
+  std::error_code error;
+  if (!fs::exists(path, error)) Fail(path, "does not exist");
+  if (!fs::is_regular_file(path, error)) Fail(path, "is not a regular file");
+  const std::string extension = Lower(fs::path(path).extension().string());
+  if (extension != ".msh" && extension != ".geo") {
+    Fail(path, "is neither a Gmsh mesh (.msh) nor a Gmsh geometry (.geo)");
+  }
+  if (!(std::isfinite(request.length_unit_m) && request.length_unit_m > 0.0)) {
+    Fail(path, "length unit must be a finite number of metres > 0");
+  }
+  const std::uintmax_t bytes = fs::file_size(path, error);
+  if (!error && bytes > kMaxMeshFileBytes) {
+    Fail(path, std::to_string(bytes >> 20) + " MiB is more than the " + std::to_string(kMaxMeshFileBytes >> 20) +
+                   " MiB a mesh file may have");
+  }
+
+  ImportedMesh imported;
+  imported.gmsh_element_type = GmshTetrahedronType(request.order);
+  GmshSession& session = *session_pointer;
+  if (extension == ".msh") {
+    if (access(path.c_str(), R_OK) != 0) Fail(path, "cannot be read (permissions?)");
+    gmsh::open(path);
+    session.ThrowOnError(path, "read it");
+    imported.meshed_file = path;
+  } else {
+    if (!(std::isfinite(request.mesh_size) && request.mesh_size > 0.0)) {
+      Fail(path, "a .geo needs a mesh_size > 0 (the largest element edge, in the file's length unit)");
+    }
+    const std::string geo = ReadWholeFile(path);
+    std::ostringstream key;
+    key << GMSH_API_VERSION << ' ' << request.mesh_size << ' ' << static_cast<int>(request.order);
+    std::ostringstream name;
+    name << std::hex << Fnv1a(key.str(), Fnv1a(geo)) << ".msh";
+    const std::string cache_dir = request.cache_dir.empty() ? DefaultCacheDirectory() : request.cache_dir;
+    const std::string cached = cache_dir.empty() ? std::string() : cache_dir + "/" + name.str();
+    if (!cached.empty() && fs::exists(cached, error)) {
+      gmsh::open(cached);
+      session.ThrowOnError(cached, "read this cached mesh (delete it to mesh again)");
+      imported.meshed_file = cached;
+      imported.from_cache = true;
+    } else {
+      gmsh::open(path);
+      session.ThrowOnError(path, "read it");
+      MeshGeo(request, &session);
+      imported.meshed_file = path;
+      if (!cached.empty()) {
+        // Written under a temporary name and renamed: a reader never sees half a file.
+        fs::create_directories(cache_dir, error);
+        // (Gmsh picks the format from the extension: it must stay .msh.)
+        const std::string partial = cached.substr(0, cached.size() - 4) + ".part" + std::to_string(getpid()) + ".msh";
+        if (!error) {
+          gmsh::write(partial);
+          if (fs::exists(partial, error)) {
+            fs::rename(partial, cached, error);
+            if (!error) imported.meshed_file = cached;
+          }
+        }
+        gmsh::logger::stop();  // a cache that cannot be written is not an error of the file
+        gmsh::logger::start();
+      }
+    }
+  }
+
+  // Element blocks: exactly the requested tetrahedra among the 3-D elements.
+  std::vector<int> types;
+  gmsh::model::mesh::getElementTypes(types, 3);
+  const int wanted_type = imported.gmsh_element_type;
+  std::string others;
+  for (int type : types) {
+    if (type != wanted_type) others += (others.empty() ? "" : ", ") + ElementTypeName(type);
+  }
+  if (std::find(types.begin(), types.end(), wanted_type) == types.end()) {
+    Fail(path, std::string("holds no ") + fem::ToString(request.order) + " tetrahedra (Gmsh type " +
+                   std::to_string(wanted_type) + ")" +
+                   (others.empty() ? ": it has no volume elements (mesh it in 3-D)" : "; it has " + others) +
+                   (request.order == fem::ElementOrder::kTet10 ? "; set element_order: TET4 or mesh with order 2" : ""));
+  }
+  if (!others.empty()) {
+    Fail(path, "mixes other volume elements with the " + std::string(fem::ToString(request.order)) +
+                   " tetrahedra: " + others + "; a body has one element type");
+  }
+  std::vector<std::size_t> element_tags, element_nodes;
+  gmsh::model::mesh::getElementsByType(wanted_type, element_tags, element_nodes);
+  const int per_element = fem::NodesPerElement(request.order);
+
+  std::vector<std::size_t> node_tags;
+  std::vector<double> coordinates, parametric;
+  gmsh::model::mesh::getNodes(node_tags, coordinates, parametric, -1, -1, false, false);
+  std::unordered_map<std::size_t, int> tag_to_gmsh_index;
+  tag_to_gmsh_index.reserve(node_tags.size());
+  for (std::size_t i = 0; i < node_tags.size(); ++i) tag_to_gmsh_index.emplace(node_tags[i], static_cast<int>(i));
+
+  // Only the nodes of tetrahedra, numbered in order of their Gmsh tags.
+  std::vector<char> used(node_tags.size(), 0);
+  for (std::size_t tag : element_nodes) {
+    const auto found = tag_to_gmsh_index.find(tag);
+    if (found == tag_to_gmsh_index.end()) Fail(path, "an element refers to node " + std::to_string(tag) + ", which the file does not define");
+    used[static_cast<std::size_t>(found->second)] = 1;
+  }
+  std::vector<int> by_tag(node_tags.size());
+  std::iota(by_tag.begin(), by_tag.end(), 0);
+  std::sort(by_tag.begin(), by_tag.end(), [&](int a, int b) { return node_tags[static_cast<std::size_t>(a)] < node_tags[static_cast<std::size_t>(b)]; });
+  std::unordered_map<std::size_t, int> tag_to_node;
+  int num_nodes = 0;
+  for (int i : by_tag) {
+    if (used[static_cast<std::size_t>(i)]) tag_to_node.emplace(node_tags[static_cast<std::size_t>(i)], num_nodes++);
+  }
+  if (num_nodes > request.max_nodes) {
+    Fail(path, std::to_string(num_nodes) + " nodes is more than the " + std::to_string(request.max_nodes) +
+                   " allowed; use a coarser mesh");
+  }
+  fem::Mesh& mesh = imported.mesh;
+  mesh.order = request.order;
+  mesh.nodes_m.resize(num_nodes, 3);
+  for (const auto& [tag, node] : tag_to_node) {
+    const std::size_t g = static_cast<std::size_t>(tag_to_gmsh_index.at(tag));
+    for (int a = 0; a < 3; ++a) {
+      mesh.nodes_m(node, a) = coordinates[3 * g + static_cast<std::size_t>(a)] * request.length_unit_m + request.offset_m[a];
+    }
+  }
+  const std::vector<int> gmsh_local = GmshToFemOrder(wanted_type, request.order);
+  const int num_elements = static_cast<int>(element_tags.size());
+  mesh.elements.resize(num_elements, per_element);
+  for (int e = 0; e < num_elements; ++e) {
+    for (int k = 0; k < per_element; ++k) {
+      const std::size_t tag = element_nodes[static_cast<std::size_t>(e) * static_cast<std::size_t>(per_element) +
+                                            static_cast<std::size_t>(gmsh_local[static_cast<std::size_t>(k)])];
+      mesh.elements(e, k) = tag_to_node.at(tag);
+    }
+  }
+
+  // Inverted or degenerate tetrahedra, named by their Gmsh tag (the user's file's numbering).
+  double largest_volume = 0.0;
+  for (int e = 0; e < num_elements; ++e) largest_volume = std::max(largest_volume, std::abs(fem::ElementVolume(mesh, e)));
+  for (int e = 0; e < num_elements; ++e) {
+    const double volume = fem::ElementVolume(mesh, e);
+    if (!(volume > 1e-12 * largest_volume)) {
+      Fail(path, "tetrahedron " + std::to_string(element_tags[static_cast<std::size_t>(e)]) + " is " +
+                     (volume < 0.0 ? "inverted (negative volume: its corners are in left-handed order)"
+                                   : "degenerate (zero volume)"));
+    }
+  }
+  try {
+    fem::ValidateMesh(mesh);
+  } catch (const InputError& invalid) {
+    Fail(path, invalid.what());
+  }
+
+  // One piece: a body in several pieces would need Dirichlet nodes on every piece.
+  std::vector<int> parent(static_cast<std::size_t>(num_nodes));
+  std::iota(parent.begin(), parent.end(), 0);
+  for (int e = 0; e < num_elements; ++e) {
+    const int first = Root(parent, mesh.elements(e, 0));
+    for (int k = 1; k < 4; ++k) parent[static_cast<std::size_t>(Root(parent, mesh.elements(e, k)))] = first;
+  }
+  std::map<int, int> piece_elements;
+  for (int e = 0; e < num_elements; ++e) ++piece_elements[Root(parent, mesh.elements(e, 0))];
+  if (piece_elements.size() > 1) {
+    std::vector<int> sizes;
+    for (const auto& [root, count] : piece_elements) sizes.push_back(count);
+    std::sort(sizes.rbegin(), sizes.rend());
+    std::ostringstream message;
+    message << "has " << sizes.size() << " disconnected pieces (of " << sizes[0] << ", " << sizes[1]
+            << (sizes.size() > 2 ? ", ..." : "") << " tetrahedra); a body is one piece: split it into two bodies "
+            << "or join the volumes (Coherence in the .geo)";
+    Fail(path, message.str());
+  }
+
+  // Physical groups as node sets; a group without a name is known by its number.
+  gmsh::vectorpair groups;
+  gmsh::model::getPhysicalGroups(groups);
+  for (const auto& [dim, tag] : groups) {
+    std::string name;
+    gmsh::model::getPhysicalName(dim, tag, name);
+    if (name.empty()) name = std::to_string(tag);
+    std::vector<std::size_t> tags;
+    std::vector<double> unused;
+    gmsh::model::mesh::getNodesForPhysicalGroup(dim, tag, tags, unused);
+    std::vector<int>& nodes = imported.group_nodes[name];
+    for (std::size_t t : tags) {
+      const auto found = tag_to_node.find(t);
+      if (found != tag_to_node.end()) nodes.push_back(found->second);
+    }
+    std::sort(nodes.begin(), nodes.end());
+    nodes.erase(std::unique(nodes.begin(), nodes.end()), nodes.end());
+  }
+  session.ThrowOnError(path, "read its physical groups");
+  return imported;
+}
+
+}  // namespace
+
+}  // namespace hapco::mesh_import
