@@ -265,6 +265,9 @@ ImportedMesh ImportMeshWithGmsh(const MeshRequest& request, GmshSession* session
       imported.meshed_file = cached;
       imported.from_cache = true;
     } else {
+      // Set before the .geo is read, so that it can size refined regions from it
+      // (`h = Mesh.MeshSizeMax;`, as tests/data/meshes/hertz_*.geo do).
+      gmsh::option::setNumber("Mesh.MeshSizeMax", request.mesh_size);
       gmsh::open(path);
       session.ThrowOnError(path, "read it");
       MeshGeo(request, &session);
