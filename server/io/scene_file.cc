@@ -343,6 +343,7 @@ class SceneChecker {
     body_mesh->mesh = std::move(imported.mesh);
     spec->mesh = std::move(body_mesh);
 #else
+    (void)spec;
     Fail(mesh_path, mesh, mesh_tree, "file",
          "this HapCo was built without Gmsh (HAPCO_WITH_GMSH=OFF): mesh bodies need a build with libgmsh-dev");
 #endif
