@@ -14,6 +14,7 @@
 #include "common/error.h"
 #include "fem/assembly.h"
 #include "fem/elastic_body.h"
+#include "sim/scene.h"
 
 namespace hapco::mesh_import {
 namespace {
@@ -224,6 +225,30 @@ TEST_F(GmshMeshTest, InvertedAndDegenerateTetrahedraAreNamedByTheirTag) {
   flat_text.replace(flat_text.find("4 0 0 1"), 7, "4 1 1 0");  // node 4 in the plane of 1, 2, 3
   const std::string degenerate = ExpectRefused(Request(Write("flat.msh", flat_text), fem::ElementOrder::kTet4, 0));
   EXPECT_NE(degenerate.find("tetrahedron 7 is degenerate"), std::string::npos) << degenerate;
+}
+
+TEST_F(GmshMeshTest, MemoryEstimateOfAMeshBodyIsNotBelowWhatCholmodFactors) {
+  // The estimate that refuses a too-large mesh before the FEM allocates (sim::EstimateMeshBuild)
+  // against the factor CHOLMOD actually builds, for a bar and a compact body, both orders.
+  const std::string cube = Write("cube.geo",
+                                 "SetFactory(\"OpenCASCADE\");\nBox(1) = {0, 0, 0, 30, 30, 30};\n"
+                                 "Physical Surface(\"root\") = Surface In BoundingBox{-0.1, -0.1, -0.1, 30.1, 30.1, 0.1};\n");
+  for (const auto& [path, size] : {std::pair{BarGeo(), 5.0}, std::pair{cube, 3.0}}) {
+    for (fem::ElementOrder order : {fem::ElementOrder::kTet4, fem::ElementOrder::kTet10}) {
+      const ImportedMesh imported = ImportMesh(Request(path, order, size));
+      const sim::BodyBuildEstimate estimate = sim::EstimateMeshBuild(imported.mesh);
+      fem::ElasticBody::Spec spec;
+      spec.mesh = imported.mesh;
+      spec.material = {1e6, 0.3};
+      spec.clamped_nodes = imported.group_nodes.at("root");
+      const fem::ElasticBody body(std::move(spec));
+      const double actual = static_cast<double>(body.stats().factor_nonzeros);
+      EXPECT_GE(estimate.factor_nonzeros, actual) << path << " " << fem::ToString(order) << " ratio " << estimate.factor_nonzeros / actual;
+      EXPECT_LE(estimate.factor_nonzeros, 4.0 * actual) << path << " " << fem::ToString(order);
+      RecordProperty(fs::path(path).stem().string() + "_" + fem::ToString(order) + "_estimate_over_actual",
+                     std::to_string(estimate.factor_nonzeros / actual));
+    }
+  }
 }
 
 }  // namespace
