@@ -10,8 +10,8 @@
 #include <unistd.h>
 
 #include <algorithm>
-#include <chrono>
 #include <cerrno>
+#include <chrono>
 #include <cmath>
 #include <csignal>
 #include <cstdio>
@@ -19,6 +19,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <functional>
 #include <memory>
 #include <new>
@@ -430,6 +431,12 @@ constexpr int kProbesPerWorker = 1000;
 // A file whose checks take longer is refused (HDF5 may loop on corrupt metadata). Generous: the
 // checks read every array once.
 constexpr int kProbeTimeoutMs = 20'000;
+// And one whose checks need more memory than this (beyond the worker's start), bytes: the
+// checks read every array once, so a valid file needs about its own size in memory; HDF5's
+// metadata cache and our copies stay far below 256 MiB + 16 x the file.
+constexpr long long kProbeMemoryBytes = 256LL << 20;
+constexpr long long kProbeMemoryPerFileByte = 16;
+constexpr int kProbeMemoryCheckMs = 10;
 
 void CheckEverythingInProcess(const std::string& path);
 
@@ -449,10 +456,22 @@ class ProbeWorker {
       Stop();
       HAPCO_ASSERT(false, "the FCLIB pre-check process ended before it was given the file");
     }
-    if (!VerdictArrivesInTime()) {
-      // HDF5 loops on the file (or the worker hangs): a corrupt file must not hang the reader.
+    std::error_code size_error;
+    const std::uintmax_t file_bytes = std::filesystem::file_size(path, size_error);
+    const long long memory_limit = baseline_resident_bytes_ + kProbeMemoryBytes +
+                                   kProbeMemoryPerFileByte * static_cast<long long>(size_error ? 0 : file_bytes);
+    const Wait wait = AwaitVerdict(memory_limit);
+    if (wait != Wait::kVerdictOrEnd) {
+      // HDF5 loops on the file, or builds gigabytes from a few corrupt bytes (finding 14: a 2.4 KB
+      // local heap made H5Lexists allocate 5 GB in 20 s), or the worker hangs: a corrupt file
+      // must neither hang the reader nor take the machine's memory.
       kill(pid_, SIGKILL);
       Stop();
+      if (wait == Wait::kTooMuchMemory) {
+        Fail(path, "HDF5 needed more than " + std::to_string((memory_limit - baseline_resident_bytes_) >> 20) +
+                       " MiB to read this " + std::to_string(size_error ? 0 : file_bytes) +
+                       "-byte file: refused as corrupt");
+      }
       Fail(path, "HDF5 did not finish reading the file within " + std::to_string(kProbeTimeoutMs / 1000) +
                      " s: refused as corrupt");
     }
@@ -487,7 +506,17 @@ class ProbeWorker {
     pid_ = child;
     socket_ = ends[0];
     probes_ = 0;
+    // The worker starts as a copy of this process: what it holds beyond that is the file's.
+    baseline_resident_bytes_ = ResidentBytes(pid_);
     return true;
+  }
+
+  // Resident set of a process (/proc/PID/statm), bytes; 0 when it cannot be read.
+  static long long ResidentBytes(pid_t pid) {
+    std::ifstream statm("/proc/" + std::to_string(pid) + "/statm");
+    long long pages = 0, resident = 0;
+    if (!(statm >> pages >> resident)) return 0;
+    return resident * sysconf(_SC_PAGESIZE);
   }
 
   // The worker: one path in, one verdict byte out, until the parent closes its end.
@@ -533,18 +562,21 @@ class ProbeWorker {
     return true;
   }
   bool ReceiveVerdict(char* verdict) const { return ReceiveAll(socket_, verdict, 1); }
-  // True when the verdict (or the worker's end) arrives within kProbeTimeoutMs. A signal
-  // (EINTR) resumes the wait for the time left, not for a fresh kProbeTimeoutMs: libFuzzer's
-  // timer interrupts every 16 s, and restarting let a file HDF5 reads for minutes outlive the
-  // limit (finding 13, tests/data/fuzz/fclib_local/hdf5_read_outlasts_the_limit.h5).
-  bool VerdictArrivesInTime() const {
+  enum class Wait { kVerdictOrEnd, kTimeout, kTooMuchMemory };
+  // Waits for the verdict (or the worker's end) for at most kProbeTimeoutMs, looking at the
+  // worker's resident memory every kProbeMemoryCheckMs. A signal (EINTR) resumes the wait for
+  // the time left, not for a fresh kProbeTimeoutMs: libFuzzer's timer interrupts every 16 s,
+  // and restarting let a file HDF5 reads for minutes outlive the limit (finding 13).
+  Wait AwaitVerdict(long long memory_limit_bytes) const {
     pollfd ready{socket_, POLLIN, 0};
     const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(kProbeTimeoutMs);
     for (;;) {
       const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
-      const int n = poll(&ready, 1, static_cast<int>(std::max<std::chrono::milliseconds::rep>(left.count(), 0)));
+      if (left.count() <= 0) return Wait::kTimeout;
+      const int n = poll(&ready, 1, static_cast<int>(std::min<long long>(left.count(), kProbeMemoryCheckMs)));
       if (n < 0 && errno == EINTR) continue;
-      return n != 0;
+      if (n != 0) return Wait::kVerdictOrEnd;
+      if (ResidentBytes(pid_) > memory_limit_bytes) return Wait::kTooMuchMemory;
     }
   }
   bool SendAll(const void* data, std::size_t size) const {
@@ -575,6 +607,7 @@ class ProbeWorker {
   pid_t pid_ = -1;
   int socket_ = -1;
   int probes_ = 0;
+  long long baseline_resident_bytes_ = 0;
 };
 
 LocalLayout CheckFileInProcess(const std::string& path, bool* has_solution, bool* has_global);
