@@ -431,10 +431,10 @@ constexpr int kProbesPerWorker = 1000;
 // A file whose checks take longer is refused (HDF5 may loop on corrupt metadata). Generous: the
 // checks read every array once.
 constexpr int kProbeTimeoutMs = 20'000;
-// And one whose checks need more memory than this (beyond the worker's start), bytes: the
-// checks read every array once, so a valid file needs about its own size in memory; HDF5's
-// metadata cache and our copies stay far below 256 MiB + 16 x the file.
-constexpr long long kProbeMemoryBytes = 256LL << 20;
+// And one whose checks need more memory than this (beyond what the worker held before the
+// file), bytes: the checks read every array once, so a valid file needs about its own size
+// in memory; HDF5's caches and our copies stay far below 64 MiB + 16 x the file.
+constexpr long long kProbeMemoryBytes = 64LL << 20;
 constexpr long long kProbeMemoryPerFileByte = 16;
 constexpr int kProbeMemoryCheckMs = 10;
 
@@ -450,16 +450,18 @@ class ProbeWorker {
   // run in-process only).
   void Probe(const std::string& path) {
     if (socket_ < 0 && !Start()) return;
+    std::error_code size_error;
+    const std::uintmax_t file_bytes = std::filesystem::file_size(path, size_error);
+    // What the worker holds before this file (HDF5's free lists keep memory between files).
+    const long long baseline_resident_bytes = ResidentBytes(pid_);
+    const long long memory_limit = baseline_resident_bytes + kProbeMemoryBytes +
+                                   kProbeMemoryPerFileByte * static_cast<long long>(size_error ? 0 : file_bytes);
     const std::uint32_t length = static_cast<std::uint32_t>(path.size());
     char verdict = 0;
     if (!SendAll(&length, sizeof(length)) || !SendAll(path.data(), path.size())) {
       Stop();
       HAPCO_ASSERT(false, "the FCLIB pre-check process ended before it was given the file");
     }
-    std::error_code size_error;
-    const std::uintmax_t file_bytes = std::filesystem::file_size(path, size_error);
-    const long long memory_limit = baseline_resident_bytes_ + kProbeMemoryBytes +
-                                   kProbeMemoryPerFileByte * static_cast<long long>(size_error ? 0 : file_bytes);
     const Wait wait = AwaitVerdict(memory_limit);
     if (wait != Wait::kVerdictOrEnd) {
       // HDF5 loops on the file, or builds gigabytes from a few corrupt bytes (finding 14: a 2.4 KB
@@ -468,7 +470,7 @@ class ProbeWorker {
       kill(pid_, SIGKILL);
       Stop();
       if (wait == Wait::kTooMuchMemory) {
-        Fail(path, "HDF5 needed more than " + std::to_string((memory_limit - baseline_resident_bytes_) >> 20) +
+        Fail(path, "HDF5 needed more than " + std::to_string((memory_limit - baseline_resident_bytes) >> 20) +
                        " MiB to read this " + std::to_string(size_error ? 0 : file_bytes) +
                        "-byte file: refused as corrupt");
       }
@@ -506,8 +508,6 @@ class ProbeWorker {
     pid_ = child;
     socket_ = ends[0];
     probes_ = 0;
-    // The worker starts as a copy of this process: what it holds beyond that is the file's.
-    baseline_resident_bytes_ = ResidentBytes(pid_);
     return true;
   }
 
@@ -607,7 +607,6 @@ class ProbeWorker {
   pid_t pid_ = -1;
   int socket_ = -1;
   int probes_ = 0;
-  long long baseline_resident_bytes_ = 0;
 };
 
 LocalLayout CheckFileInProcess(const std::string& path, bool* has_solution, bool* has_global);
