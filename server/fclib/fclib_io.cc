@@ -23,6 +23,7 @@
 #include <functional>
 #include <memory>
 #include <new>
+#include <optional>
 #include <sstream>
 #include <utility>
 #include <vector>
@@ -417,17 +418,19 @@ void CheckIsHdf5File(const std::string& path) {
 // they run again here with the same (deterministic) outcome. Not for multi-threaded use of
 // HDF5 (neither is the serial HDF5 library).
 //
-// The child is a worker that stays (ProbeWorker): forking a large process copies its page
-// tables, and per file that was most of the fuzzer's time (docs/fuzzing.md). A worker that
-// crashed is replaced at the next file; one that has probed kProbesPerWorker files too, so
-// library state left by earlier corrupt files cannot build up. Its verdict only decides
-// whether the file is safe to parse here; the checks that count are the ones run here after.
+// The child (ProbeWorker) is forked for each new file, just before it reads it, so that it
+// starts from this process's state at that moment: HDF5's memory errors on corrupt heaps
+// depend on what its free lists hold (finding 15: a worker kept for 1000 files had read
+// earlier files, passed a file on which this process then hit HDF5's memcpy of size -1).
+// Its verdict only decides whether the file is safe to parse here; the checks that count are
+// the ones run here after. A fork copies page tables (most of the fuzzer's time per input,
+// docs/fuzzing.md); a reader's several opens of one file cost one probe (ProbeFileOnce).
 // The sanitizer runtimes' hook (sanitizer/common_interface_defs.h), declared weak so that a
 // build without sanitizers links without it.
 extern "C" void __sanitizer_set_death_callback(void (*callback)(void)) __attribute__((weak));
 
 constexpr int kProbeRefused = 3;  // the worker's verdict when the checks threw InputError
-constexpr int kProbesPerWorker = 1000;
+constexpr int kProbesPerWorker = 1;  // a fresh fork per file (finding 15)
 // A file whose checks take longer is refused (HDF5 may loop on corrupt metadata). Generous: the
 // checks read every array once.
 constexpr int kProbeTimeoutMs = 20'000;
@@ -839,25 +842,46 @@ void CheckEverythingInProcess(const std::string& path) {
   });
 }
 
+// FNV-1a (64 bit) of a file's bytes; nullopt when it cannot be read. Not a security hash:
+// it tells a rewritten file from the one probed last.
+std::optional<std::uint64_t> ContentHash(const std::string& path) {
+  std::FILE* file = std::fopen(path.c_str(), "rb");
+  if (file == nullptr) return std::nullopt;
+  std::uint64_t hash = 1469598103934665603ULL;
+  std::vector<unsigned char> chunk(1 << 20);
+  std::size_t got = 0;
+  while ((got = std::fread(chunk.data(), 1, chunk.size(), file)) > 0) {
+    for (std::size_t k = 0; k < got; ++k) hash = (hash ^ chunk[k]) * 1099511628211ULL;
+  }
+  const bool failed = std::ferror(file) != 0;
+  std::fclose(file);
+  if (failed) return std::nullopt;
+  return hash;
+}
+
 // Probes a file once per content: the child process of ProbeInChildProcess runs every check
-// (CheckEverythingInProcess), and a file whose identity (device, inode, size, modification
-// and change times, ns) is the one probed last is not probed again. A reader's several opens
-// of one file (kind, problem, solution) then cost one fork, not three.
+// (CheckEverythingInProcess), and a file whose identity (device, inode, size and the hash of
+// its bytes) is the one probed last is not probed again. A reader's several opens of one file
+// (kind, problem, solution) then cost one fork, not three. Not the modification and change
+// times (finding 15): they tick with the kernel's coarse clock (~4 ms), so a file rewritten in
+// place with other bytes of the same size within one tick kept its identity, skipped the
+// probe, and HDF5's memory error on it happened in this process.
 void ProbeFileOnce(const std::string& path) {
   struct Identity {
     dev_t device;
     ino_t inode;
     off_t size;
-    long modified_s, modified_ns, changed_s, changed_ns;
+    std::uint64_t content;
     bool operator==(const Identity&) const = default;
   };
   static std::optional<Identity> last_probed;
   struct stat info {};
   std::optional<Identity> identity;
   if (stat(path.c_str(), &info) == 0) {
-    identity = Identity{info.st_dev, info.st_ino, info.st_size, info.st_mtim.tv_sec, info.st_mtim.tv_nsec,
-                        info.st_ctim.tv_sec, info.st_ctim.tv_nsec};
-    if (last_probed && *last_probed == *identity) return;
+    if (const std::optional<std::uint64_t> content = ContentHash(path)) {
+      identity = Identity{info.st_dev, info.st_ino, info.st_size, *content};
+      if (last_probed && *last_probed == *identity) return;
+    }
   }
   last_probed.reset();
   static ProbeWorker worker;
