@@ -25,10 +25,12 @@
 #include <new>
 #include <optional>
 #include <sstream>
+#include <string_view>
 #include <utility>
 #include <vector>
 
 #include "common/error.h"
+#include "common/hash.h"
 #include "fclib/fclib_matrix.h"
 
 namespace hapco::fclib {
@@ -842,16 +844,16 @@ void CheckEverythingInProcess(const std::string& path) {
   });
 }
 
-// FNV-1a (64 bit) of a file's bytes; nullopt when it cannot be read. Not a security hash:
-// it tells a rewritten file from the one probed last.
+// FNV-1a (common/hash.h) of a file's bytes; nullopt when it cannot be read. Tells a
+// rewritten file from the one probed last.
 std::optional<std::uint64_t> ContentHash(const std::string& path) {
   std::FILE* file = std::fopen(path.c_str(), "rb");
   if (file == nullptr) return std::nullopt;
-  std::uint64_t hash = 1469598103934665603ULL;
-  std::vector<unsigned char> chunk(1 << 20);
+  std::uint64_t hash = kFnv1a64Offset;
+  std::vector<char> chunk(1 << 20);
   std::size_t got = 0;
   while ((got = std::fread(chunk.data(), 1, chunk.size(), file)) > 0) {
-    for (std::size_t k = 0; k < got; ++k) hash = (hash ^ chunk[k]) * 1099511628211ULL;
+    hash = Fnv1a64(std::string_view(chunk.data(), got), hash);
   }
   const bool failed = std::ferror(file) != 0;
   std::fclose(file);
@@ -859,7 +861,7 @@ std::optional<std::uint64_t> ContentHash(const std::string& path) {
   return hash;
 }
 
-// Probes a file once per content: the child process of ProbeInChildProcess runs every check
+// Probes a file once per content: the worker process (ProbeWorker) runs every check
 // (CheckEverythingInProcess), and a file whose identity (device, inode, size and the hash of
 // its bytes) is the one probed last is not probed again. A reader's several opens of one file
 // (kind, problem, solution) then cost one fork, not three. Not the modification and change

@@ -16,6 +16,7 @@
 #include <unordered_map>
 
 #include "common/error.h"
+#include "common/hash.h"
 
 namespace hapco::mesh_import {
 namespace {
@@ -45,17 +46,6 @@ std::string ReadWholeFile(const std::string& path) {
   std::ostringstream text;
   text << in.rdbuf();
   return text.str();
-}
-
-// FNV-1a, 64 bit: a cache key for a .geo and its meshing options, not a security boundary (a
-// collision would only make the cache return another file's mesh, which the group and size
-// checks would then see; the key also names the Gmsh version).
-std::uint64_t Fnv1a(const std::string& bytes, std::uint64_t hash = 1469598103934665603ULL) {
-  for (unsigned char c : bytes) {
-    hash ^= c;
-    hash *= 1099511628211ULL;
-  }
-  return hash;
 }
 
 // Gmsh writes its messages to a logger we start per import; the first "Error" is the user's.
@@ -256,7 +246,9 @@ ImportedMesh ImportMeshWithGmsh(const MeshRequest& request, GmshSession* session
     std::ostringstream key;
     key << GMSH_API_VERSION << ' ' << request.mesh_size << ' ' << static_cast<int>(request.order);
     std::ostringstream name;
-    name << std::hex << Fnv1a(key.str(), Fnv1a(geo)) << ".msh";
+    // The cache key (common/hash.h): a collision would only hand back another file's mesh,
+    // which the group and size checks would then see; the key also names the Gmsh version.
+    name << std::hex << Fnv1a64(key.str(), Fnv1a64(geo)) << ".msh";
     const std::string cache_dir = request.cache_dir.empty() ? DefaultCacheDirectory() : request.cache_dir;
     const std::string cached = cache_dir.empty() ? std::string() : cache_dir + "/" + name.str();
     if (!cached.empty() && fs::exists(cached, error)) {

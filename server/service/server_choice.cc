@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <cstring>
 
+#include "common/hash.h"
 #include "service/pose_intake.h"
 
 namespace hapco::service {
@@ -16,16 +17,9 @@ namespace {
 // FNV-1a over "client\0server": a fixed hash (std::hash may differ between builds, and the
 // clients of one deployment must agree only with themselves, but a fixed one is testable).
 uint64_t RendezvousWeight(std::string_view client_id, std::string_view server_id) {
-  uint64_t h = 1469598103934665603ULL;
-  auto mix = [&h](std::string_view text) {
-    for (const unsigned char c : text) {
-      h ^= c;
-      h *= 1099511628211ULL;
-    }
-  };
-  mix(client_id);
-  mix(std::string_view("\0", 1));  // separator: ("ab", "c") and ("a", "bc") differ
-  mix(server_id);
+  uint64_t h = Fnv1a64(client_id);
+  h = Fnv1a64(std::string_view("\0", 1), h);  // separator: ("ab", "c") and ("a", "bc") differ
+  h = Fnv1a64(server_id, h);
   // Finaliser (splitmix64): FNV's low bits alone spread poorly over similar ids.
   h ^= h >> 30;
   h *= 0xbf58476d1ce4e5b9ULL;
