@@ -17,6 +17,11 @@ class InputError : public std::runtime_error {
 [[noreturn]] void AssertionFailed(const char* condition, const char* file, int line,
                                   const char* message);
 
+// A failed assertion prints its message and calls abort(), unless a process sets an exit code
+// here: fclib's reader worker (a forked child) ends with it instead, so that its parent tells a
+// HapCo bug from a library's crash on a corrupt file (SIGSEGV, SIGABRT). -1 = abort().
+void SetAssertionExitCode(int exit_code);
+
 }  // namespace hapco
 
 // Checked in every build type: the cost is a predictable branch, the benefit is a clear

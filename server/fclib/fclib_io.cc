@@ -1,11 +1,12 @@
 #include "fclib/fclib_io.h"
 
 #include "fclib/fclib_c.h"
+#include <dlfcn.h>
+#include <execinfo.h>
 #include <hdf5.h>
 #include <poll.h>
 #include <sys/prctl.h>
 #include <sys/socket.h>
-#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -26,11 +27,11 @@
 #include <optional>
 #include <sstream>
 #include <string_view>
+#include <type_traits>
 #include <utility>
 #include <vector>
 
 #include "common/error.h"
-#include "common/hash.h"
 #include "fclib/fclib_matrix.h"
 
 namespace hapco::fclib {
@@ -48,6 +49,18 @@ void SilenceHdf5() {
 
 [[noreturn]] void Fail(const std::string& path, const std::string& what) {
   throw InputError("FCLIB file '" + path + "': " + what);
+}
+
+// In the reader's worker process (ReaderWorker, end of file): its end of the socket; -1 in
+// every other process.
+int worker_socket = -1;
+constexpr char kCheckedMark = 'C';
+
+// Called by a read once the file's layout has passed every check, before libfclib reads it:
+// the reader then stops limiting the worker's memory to what checks need (the read itself is
+// bounded by the checked sizes; a valid file of kMaxContacts holds a 1.2 GB W).
+void MarkChecked() {
+  if (worker_socket >= 0 && send(worker_socket, &kCheckedMark, 1, MSG_NOSIGNAL) != 1) std::_Exit(0);
 }
 
 // RAII for an HDF5 identifier.
@@ -412,217 +425,6 @@ void CheckIsHdf5File(const std::string& path) {
   if (H5Fis_hdf5(path.c_str()) <= 0) Fail(path, "is not an HDF5 file");
 }
 
-// Opens, checks the local-problem layout, closes (libfclib reopens the file by name).
-// HDF5 1.10.8 itself crashes on some corrupt files (found by fuzzing: SIGSEGV in
-// H5F__accum_read under H5Lexists, tests/data/fuzz/fclib_local/hdf5_segv_in_link_lookup.h5),
-// and no check of ours can run before HDF5 parses its own metadata. So the checks run first
-// in a child process: if HDF5 kills it, the file is refused with an InputError; otherwise
-// they run again here with the same (deterministic) outcome. Not for multi-threaded use of
-// HDF5 (neither is the serial HDF5 library).
-//
-// The child (ProbeWorker) is forked for each new file, just before it reads it, so that it
-// starts from this process's state at that moment: HDF5's memory errors on corrupt heaps
-// depend on what its free lists hold (finding 15: a worker kept for 1000 files had read
-// earlier files, passed a file on which this process then hit HDF5's memcpy of size -1).
-// Its verdict only decides whether the file is safe to parse here; the checks that count are
-// the ones run here after. A fork copies page tables (most of the fuzzer's time per input,
-// docs/fuzzing.md); a reader's several opens of one file cost one probe (ProbeFileOnce).
-// The sanitizer runtimes' hook (sanitizer/common_interface_defs.h), declared weak so that a
-// build without sanitizers links without it.
-extern "C" void __sanitizer_set_death_callback(void (*callback)(void)) __attribute__((weak));
-
-constexpr int kProbeRefused = 3;  // the worker's verdict when the checks threw InputError
-constexpr int kProbesPerWorker = 1;  // a fresh fork per file (finding 15)
-// A file whose checks take longer is refused (HDF5 may loop on corrupt metadata). Generous: the
-// checks read every array once.
-constexpr int kProbeTimeoutMs = 20'000;
-// And one whose checks need more memory than this (beyond what the worker held before the
-// file), bytes: the checks read every array once, so a valid file needs about its own size
-// in memory; HDF5's caches and our copies stay far below 64 MiB + 16 x the file.
-constexpr long long kProbeMemoryBytes = 64LL << 20;
-constexpr long long kProbeMemoryPerFileByte = 16;
-constexpr int kProbeMemoryCheckMs = 10;
-
-void CheckEverythingInProcess(const std::string& path);
-
-class ProbeWorker {
- public:
-  ~ProbeWorker() { Stop(); }
-
-  // Runs CheckEverythingInProcess(path) in the worker. Throws InputError when HDF5 crashed
-  // the worker on this file; returns quietly when the checks passed or refused the file (the
-  // caller's own run gives the message) or when no process can be started (then the checks
-  // run in-process only).
-  void Probe(const std::string& path) {
-    if (socket_ < 0 && !Start()) return;
-    std::error_code size_error;
-    const std::uintmax_t file_bytes = std::filesystem::file_size(path, size_error);
-    // What the worker holds before this file (HDF5's free lists keep memory between files).
-    const long long baseline_resident_bytes = ResidentBytes(pid_);
-    const long long memory_limit = baseline_resident_bytes + kProbeMemoryBytes +
-                                   kProbeMemoryPerFileByte * static_cast<long long>(size_error ? 0 : file_bytes);
-    const std::uint32_t length = static_cast<std::uint32_t>(path.size());
-    char verdict = 0;
-    if (!SendAll(&length, sizeof(length)) || !SendAll(path.data(), path.size())) {
-      Stop();
-      HAPCO_ASSERT(false, "the FCLIB pre-check process ended before it was given the file");
-    }
-    const Wait wait = AwaitVerdict(memory_limit);
-    if (wait != Wait::kVerdictOrEnd) {
-      // HDF5 loops on the file, or builds gigabytes from a few corrupt bytes (finding 14: a 2.4 KB
-      // local heap made H5Lexists allocate 5 GB in 20 s), or the worker hangs: a corrupt file
-      // must neither hang the reader nor take the machine's memory.
-      kill(pid_, SIGKILL);
-      Stop();
-      if (wait == Wait::kTooMuchMemory) {
-        Fail(path, "HDF5 needed more than " + std::to_string((memory_limit - baseline_resident_bytes) >> 20) +
-                       " MiB to read this " + std::to_string(size_error ? 0 : file_bytes) +
-                       "-byte file: refused as corrupt");
-      }
-      Fail(path, "HDF5 did not finish reading the file within " + std::to_string(kProbeTimeoutMs / 1000) +
-                     " s: refused as corrupt");
-    }
-    if (!ReceiveVerdict(&verdict)) {
-      // The worker ended during this file: by a signal if HDF5 crashed on it.
-      const int status = Stop();
-      if (WIFSIGNALED(status)) {
-        Fail(path, std::string("HDF5 crashed reading the file (") + strsignal(WTERMSIG(status)) + "): it is corrupt");
-      }
-      HAPCO_ASSERT(false, "the FCLIB pre-check process failed for another reason than the file");
-    }
-    HAPCO_ASSERT(verdict == 0 || verdict == kProbeRefused, "the FCLIB pre-check process sent an unknown verdict");
-    if (++probes_ >= kProbesPerWorker) Stop();
-  }
-
- private:
-  bool Start() {
-    int ends[2] = {-1, -1};
-    if (socketpair(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0, ends) != 0) return false;
-    std::fflush(nullptr);
-    const pid_t child = fork();
-    if (child < 0) {
-      close(ends[0]);
-      close(ends[1]);
-      return false;
-    }
-    if (child == 0) {
-      close(ends[0]);
-      Serve(ends[1]);
-    }
-    close(ends[1]);
-    pid_ = child;
-    socket_ = ends[0];
-    probes_ = 0;
-    return true;
-  }
-
-  // Resident set of a process (/proc/PID/statm), bytes; 0 when it cannot be read.
-  static long long ResidentBytes(pid_t pid) {
-    std::ifstream statm("/proc/" + std::to_string(pid) + "/statm");
-    long long pages = 0, resident = 0;
-    if (!(statm >> pages >> resident)) return 0;
-    return resident * sysconf(_SC_PAGESIZE);
-  }
-
-  // The worker: one path in, one verdict byte out, until the parent closes its end.
-  [[noreturn]] static void Serve(int socket) {
-    prctl(PR_SET_PDEATHSIG, SIGKILL);
-    // A crash must end the worker by its signal, not in a sanitizer's or fuzzer's handler
-    // (SIGABRT too: an ASan report ends by abort() under abort_on_error, and libFuzzer's
-    // handler, inherited over fork, wrote bogus crash files and could deadlock in the child on
-    // a lock of a thread the child does not have: the long run stopped in a 15 s timeout).
-    for (const int signal_number : {SIGSEGV, SIGBUS, SIGFPE, SIGILL, SIGABRT, SIGTRAP}) {
-      std::signal(signal_number, SIG_DFL);
-    }
-    // Likewise a sanitizer's death callback (libFuzzer installs one that writes the unit it
-    // holds as a crash file: from the worker, a bogus one). Weak: absent outside sanitizer builds.
-    if (__sanitizer_set_death_callback != nullptr) __sanitizer_set_death_callback(nullptr);
-    std::string path;
-    for (;;) {
-      std::uint32_t length = 0;
-      if (!ReceiveAll(socket, &length, sizeof(length))) std::_Exit(0);
-      path.resize(length);
-      if (!ReceiveAll(socket, path.data(), length)) std::_Exit(0);
-      char verdict = 0;
-      try {
-        CheckEverythingInProcess(path);
-      } catch (const InputError&) {
-        verdict = kProbeRefused;
-      } catch (const std::bad_alloc&) {
-        verdict = kProbeRefused;
-      }
-      if (send(socket, &verdict, 1, MSG_NOSIGNAL) != 1) std::_Exit(0);
-    }
-  }
-
-  static bool ReceiveAll(int socket, void* data, std::size_t size) {
-    auto* bytes = static_cast<char*>(data);
-    while (size > 0) {
-      const ssize_t got = recv(socket, bytes, size, 0);
-      if (got < 0 && errno == EINTR) continue;
-      if (got <= 0) return false;
-      bytes += got;
-      size -= static_cast<std::size_t>(got);
-    }
-    return true;
-  }
-  bool ReceiveVerdict(char* verdict) const { return ReceiveAll(socket_, verdict, 1); }
-  enum class Wait { kVerdictOrEnd, kTimeout, kTooMuchMemory };
-  // Waits for the verdict (or the worker's end) for at most kProbeTimeoutMs, looking at the
-  // worker's resident memory every kProbeMemoryCheckMs. A signal (EINTR) resumes the wait for
-  // the time left, not for a fresh kProbeTimeoutMs: libFuzzer's timer interrupts every 16 s,
-  // and restarting let a file HDF5 reads for minutes outlive the limit (finding 13).
-  Wait AwaitVerdict(long long memory_limit_bytes) const {
-    pollfd ready{socket_, POLLIN, 0};
-    const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(kProbeTimeoutMs);
-    for (;;) {
-      const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
-      if (left.count() <= 0) return Wait::kTimeout;
-      const int n = poll(&ready, 1, static_cast<int>(std::min<long long>(left.count(), kProbeMemoryCheckMs)));
-      if (n < 0 && errno == EINTR) continue;
-      if (n != 0) return Wait::kVerdictOrEnd;
-      if (ResidentBytes(pid_) > memory_limit_bytes) return Wait::kTooMuchMemory;
-    }
-  }
-  bool SendAll(const void* data, std::size_t size) const {
-    const auto* bytes = static_cast<const char*>(data);
-    while (size > 0) {
-      const ssize_t sent = send(socket_, bytes, size, MSG_NOSIGNAL);  // no SIGPIPE if it died
-      if (sent < 0 && errno == EINTR) continue;
-      if (sent <= 0) return false;
-      bytes += sent;
-      size -= static_cast<std::size_t>(sent);
-    }
-    return true;
-  }
-
-  // Closes the worker's socket (it exits) and reaps it; returns its wait status.
-  int Stop() {
-    if (socket_ >= 0) close(socket_);
-    socket_ = -1;
-    int status = 0;
-    if (pid_ > 0) {
-      while (waitpid(pid_, &status, 0) < 0 && errno == EINTR) {
-      }
-    }
-    pid_ = -1;
-    return status;
-  }
-
-  pid_t pid_ = -1;
-  int socket_ = -1;
-  int probes_ = 0;
-};
-
-LocalLayout CheckFileInProcess(const std::string& path, bool* has_solution, bool* has_global);
-void ProbeFileOnce(const std::string& path);
-
-LocalLayout CheckFile(const std::string& path, bool* has_solution = nullptr,
-                      bool* has_global = nullptr) {
-  ProbeFileOnce(path);
-  return CheckFileInProcess(path, has_solution, has_global);
-}
-
 LocalLayout CheckFileInProcess(const std::string& path, bool* has_solution, bool* has_global) {
   SilenceHdf5();
   CheckIsHdf5File(path);
@@ -795,11 +597,6 @@ GlobalLayout CheckGlobalFileInProcess(const std::string& path, bool* has_solutio
   return layout;
 }
 
-GlobalLayout CheckGlobalFile(const std::string& path, bool* has_solution = nullptr) {
-  ProbeFileOnce(path);
-  return CheckGlobalFileInProcess(path, has_solution);
-}
-
 // The datasets fclib_read_solution reads: v (n_v entries, 0 = none), r and u (n_r each).
 void CheckSolutionInProcess(const std::string& path, int n_r, int n_v) {
   SilenceHdf5();
@@ -818,77 +615,6 @@ FclibKind KindInProcess(const std::string& path) {
   if (Exists(file.get(), path, "/fclib_local")) return FclibKind::kLocal;
   if (Exists(file.get(), path, "/fclib_global")) return FclibKind::kGlobal;
   Fail(path, "is an HDF5 file but not an FCLIB problem (neither /fclib_local nor /fclib_global)");
-}
-
-// Every check any reader here runs on a file, each branch on its own: whatever a reader does
-// in-process is a prefix of one of these branches, so a file that passed them all in the
-// child cannot crash HDF5 in the parent (same file, same deterministic calls).
-void CheckEverythingInProcess(const std::string& path) {
-  auto branch = [](const auto& checks) {
-    try {
-      checks();
-    } catch (const InputError&) {
-    } catch (const std::bad_alloc&) {
-    }
-  };
-  branch([&] { KindInProcess(path); });
-  branch([&] {
-    bool has_solution = false, has_global = false;
-    const LocalLayout layout = CheckFileInProcess(path, &has_solution, &has_global);
-    if (has_solution && !has_global) CheckSolutionInProcess(path, layout.n, 0);
-  });
-  branch([&] {
-    bool has_solution = false;
-    const GlobalLayout layout = CheckGlobalFileInProcess(path, &has_solution);
-    if (has_solution) CheckSolutionInProcess(path, layout.local_size(), layout.dofs());
-  });
-}
-
-// FNV-1a (common/hash.h) of a file's bytes; nullopt when it cannot be read. Tells a
-// rewritten file from the one probed last.
-std::optional<std::uint64_t> ContentHash(const std::string& path) {
-  std::FILE* file = std::fopen(path.c_str(), "rb");
-  if (file == nullptr) return std::nullopt;
-  std::uint64_t hash = kFnv1a64Offset;
-  std::vector<char> chunk(1 << 20);
-  std::size_t got = 0;
-  while ((got = std::fread(chunk.data(), 1, chunk.size(), file)) > 0) {
-    hash = Fnv1a64(std::string_view(chunk.data(), got), hash);
-  }
-  const bool failed = std::ferror(file) != 0;
-  std::fclose(file);
-  if (failed) return std::nullopt;
-  return hash;
-}
-
-// Probes a file once per content: the worker process (ProbeWorker) runs every check
-// (CheckEverythingInProcess), and a file whose identity (device, inode, size and the hash of
-// its bytes) is the one probed last is not probed again. A reader's several opens of one file
-// (kind, problem, solution) then cost one fork, not three. Not the modification and change
-// times (finding 15): they tick with the kernel's coarse clock (~4 ms), so a file rewritten in
-// place with other bytes of the same size within one tick kept its identity, skipped the
-// probe, and HDF5's memory error on it happened in this process.
-void ProbeFileOnce(const std::string& path) {
-  struct Identity {
-    dev_t device;
-    ino_t inode;
-    off_t size;
-    std::uint64_t content;
-    bool operator==(const Identity&) const = default;
-  };
-  static std::optional<Identity> last_probed;
-  struct stat info {};
-  std::optional<Identity> identity;
-  if (stat(path.c_str(), &info) == 0) {
-    if (const std::optional<std::uint64_t> content = ContentHash(path)) {
-      identity = Identity{info.st_dev, info.st_ino, info.st_size, *content};
-      if (last_probed && *last_probed == *identity) return;
-    }
-  }
-  last_probed.reset();
-  static ProbeWorker worker;
-  worker.Probe(path);
-  last_probed = identity;
 }
 
 struct GlobalDeleter {
@@ -1059,9 +785,11 @@ Eigen::SparseMatrix<double> ToSparse(const fclib_matrix& matrix, TripletRows tri
 
 }  // namespace detail
 
-contact::ContactProblem ReadFclibLocalProblem(const std::string& path,
-                                              FclibFileDetails* details) {
-  const LocalLayout layout = CheckFile(path);
+namespace {
+// The readers' bodies: they run in the worker process (ReaderWorker below).
+contact::ContactProblem ReadLocalProblemInProcess(const std::string& path, FclibFileDetails* details) {
+  const LocalLayout layout = CheckFileInProcess(path, nullptr, nullptr);
+  MarkChecked();
   LocalPtr local(fclib_read_local(path.c_str()));
   if (!local) Fail(path, "libfclib could not read the local problem");
   HAPCO_ASSERT(local->W != nullptr && local->W->m == layout.m && local->W->n == layout.n &&
@@ -1134,6 +862,7 @@ contact::ContactProblem ReadFclibLocalProblem(const std::string& path,
   }
   return problem;
 }
+}  // namespace
 
 void WriteFclibLocalProblem(const std::string& path, const contact::ContactProblem& problem,
                             const FclibInfo& info) {
@@ -1153,10 +882,12 @@ void WriteFclibLocalProblem(const std::string& path, const contact::ContactProbl
   }
 }
 
-void WriteFclibSolution(const std::string& path, const Eigen::VectorXd& force_n,
-                        const Eigen::VectorXd& displacement_m) {
+namespace {
+void WriteLocalSolutionInProcess(const std::string& path, const Eigen::VectorXd& force_n,
+                                 const Eigen::VectorXd& displacement_m) {
   bool has_solution = false, has_global = false;
-  const LocalLayout layout = CheckFile(path, &has_solution, &has_global);
+  const LocalLayout layout = CheckFileInProcess(path, &has_solution, &has_global);
+  MarkChecked();
   if (has_global) {
     Fail(path, "also holds a global problem; libfclib would size the solution from it");
   }
@@ -1186,15 +917,18 @@ void WriteFclibSolution(const std::string& path, const Eigen::VectorXd& force_n,
     Fail(path, "libfclib failed to write the solution (is the file writable?)");
   }
 }
+}  // namespace
 
-std::optional<FclibSolution> ReadFclibSolution(const std::string& path) {
+namespace {
+std::optional<FclibSolution> ReadLocalSolutionInProcess(const std::string& path) {
   bool has_solution = false, has_global = false;
-  const LocalLayout layout = CheckFile(path, &has_solution, &has_global);
+  const LocalLayout layout = CheckFileInProcess(path, &has_solution, &has_global);
   if (!has_solution) return std::nullopt;
   if (has_global) {
     Fail(path, "also holds a global problem; its solution would be sized from it");
   }
-  CheckSolutionInProcess(path, layout.n, 0);  // probed with the file (ProbeFileOnce)
+  CheckSolutionInProcess(path, layout.n, 0);
+  MarkChecked();
   SolutionPtr solution(fclib_read_solution(path.c_str()));
   if (!solution) Fail(path, "libfclib could not read the solution");
   FclibSolution out;
@@ -1202,6 +936,7 @@ std::optional<FclibSolution> ReadFclibSolution(const std::string& path) {
   out.displacement_m = CopyChecked(solution->u, layout.n, path, "/solution/u");
   return out;
 }
+}  // namespace
 
 double FclibMeritLocal(const contact::ContactProblem& problem, const Eigen::VectorXd& force_n) {
   ValidateStoredProblem(problem);
@@ -1230,13 +965,10 @@ double RelativeAsymmetry(const Eigen::MatrixXd& w) {
   return (w - w.transpose()).cwiseAbs().maxCoeff() / scale;
 }
 
-FclibKind ReadFclibKind(const std::string& path) {
-  ProbeFileOnce(path);
-  return KindInProcess(path);
-}
-
-contact::GlobalContactProblem ReadFclibGlobalProblem(const std::string& path, FclibGlobalDetails* details) {
-  const GlobalLayout layout = CheckGlobalFile(path);
+namespace {
+contact::GlobalContactProblem ReadGlobalProblemInProcess(const std::string& path, FclibGlobalDetails* details) {
+  const GlobalLayout layout = CheckGlobalFileInProcess(path, nullptr);
+  MarkChecked();
   GlobalPtr global(fclib_read_global(path.c_str()));
   if (!global) Fail(path, "libfclib could not read the global problem");
   HAPCO_ASSERT(global->M != nullptr && global->H != nullptr && global->G == nullptr &&
@@ -1292,6 +1024,7 @@ contact::GlobalContactProblem ReadFclibGlobalProblem(const std::string& path, Fc
   }
   return problem;
 }
+}  // namespace
 
 void WriteFclibGlobalProblem(const std::string& path, const contact::GlobalContactProblem& problem,
                              const FclibInfo& info) {
@@ -1330,9 +1063,11 @@ void WriteFclibGlobalProblem(const std::string& path, const contact::GlobalConta
   if (fclib_write_global(&global, path.c_str()) != 1) Fail(path, "libfclib failed to write the global problem");
 }
 
-void WriteFclibGlobalSolution(const std::string& path, const FclibGlobalSolution& solution) {
+namespace {
+void WriteGlobalSolutionInProcess(const std::string& path, const FclibGlobalSolution& solution) {
   bool has_solution = false;
-  const GlobalLayout layout = CheckGlobalFile(path, &has_solution);
+  const GlobalLayout layout = CheckGlobalFileInProcess(path, &has_solution);
+  MarkChecked();
   if (solution.velocity.size() != layout.dofs() || solution.force.size() != layout.local_size() ||
       solution.local_velocity.size() != layout.local_size()) {
     std::ostringstream msg;
@@ -1363,12 +1098,15 @@ void WriteFclibGlobalSolution(const std::string& path, const FclibGlobalSolution
     Fail(path, "libfclib failed to write the solution (is the file writable?)");
   }
 }
+}  // namespace
 
-std::optional<FclibGlobalSolution> ReadFclibGlobalSolution(const std::string& path) {
+namespace {
+std::optional<FclibGlobalSolution> ReadGlobalSolutionInProcess(const std::string& path) {
   bool has_solution = false;
-  const GlobalLayout layout = CheckGlobalFile(path, &has_solution);
+  const GlobalLayout layout = CheckGlobalFileInProcess(path, &has_solution);
   if (!has_solution) return std::nullopt;
-  CheckSolutionInProcess(path, layout.local_size(), layout.dofs());  // probed with the file
+  CheckSolutionInProcess(path, layout.local_size(), layout.dofs());
+  MarkChecked();
   SolutionPtr solution(fclib_read_solution(path.c_str()));
   if (!solution) Fail(path, "libfclib could not read the solution");
   FclibGlobalSolution out;
@@ -1376,6 +1114,651 @@ std::optional<FclibGlobalSolution> ReadFclibGlobalSolution(const std::string& pa
   out.force = CopyChecked(solution->r, layout.local_size(), path, "/solution/r");
   out.local_velocity = CopyChecked(solution->u, layout.local_size(), path, "/solution/u");
   return out;
+}
+
+// --- The worker process that does every read of an existing file ---
+//
+// HDF5 1.10.8 crashes (finding 5: SIGSEGV under H5Lexists), copies -1 bytes (finding 9), loops
+// (finding 13) or builds gigabytes from a few bytes (finding 14) on some corrupt files, and no
+// check of ours can run before HDF5 parses its own metadata (docs/fuzzing.md). So every access
+// to an existing file (the layout checks, libfclib's read, a solution written into the file)
+// runs in a worker process, a fork of this one, and only the parsed result comes back over a
+// socket: this process's HDF5 never opens a file it did not create. Whatever a corrupt file
+// does to HDF5's state in the worker (its free lists: finding 15) then cannot reach the reader,
+// so one worker serves many files (kRequestsPerWorker), and a batch of reads or a fuzzer pays
+// one fork, not one per file (a fork of the ASan fuzzer costs ~10 ms).
+//
+// How the worker ends tells what happened: killed by a signal = a library crashed on the file
+// (refused, InputError); a HapCo assertion, or in a sanitizer build a report whose stack does
+// not pass through HDF5, ends it with kWorkerBugExitCode = a bug (HAPCO_ASSERT here; the
+// worker printed the details). The reader waits at most kChecksTimeoutMs for the checks and
+// stops the worker when they need more than kChecksMemoryBytes + 16 x the file over what it
+// held before; once the checks passed (MarkChecked) only a generous time limit remains.
+// Not for multi-threaded use (neither is the serial HDF5 library).
+
+enum class Request : std::uint8_t {
+  kKind = 1,
+  kLocalProblem,
+  kLocalSolution,
+  kGlobalProblem,
+  kGlobalSolution,
+  kWriteLocalSolution,
+  kWriteGlobalSolution,
+};
+enum class Answer : std::uint8_t { kResult = 'R', kInputError = 'E', kOutOfMemory = 'M' };
+
+constexpr int kWorkerBugExitCode = 86;
+// A worker serves this many requests, then the next one forks afresh (HDF5 leaks a little on
+// corrupt files, finding 7) ...
+constexpr int kRequestsPerWorker = 2000;
+// ... or earlier once it holds this much more memory than when it was forked, bytes.
+constexpr long long kWorkerGrowthBytes = 256LL << 20;
+// A file whose checks take longer is refused (HDF5 may loop on corrupt metadata). Generous: the
+// checks read every array once.
+constexpr int kChecksTimeoutMs = 20'000;
+// After the checks: libfclib's read and our conversion of a checked layout (up to a dense W of
+// kMaxContacts, 1.2 GB) and the transfer.
+constexpr int kReadTimeoutMs = 600'000;
+// The checks read every array once, so a valid file needs about its own size in memory; HDF5's
+// caches and our copies stay far below 64 MiB + 16 x the file (bytes over the worker's
+// resident set before the request).
+constexpr long long kChecksMemoryBytes = 64LL << 20;
+constexpr long long kChecksMemoryPerFileByte = 16;
+constexpr int kMemoryCheckMs = 10;
+
+WorkerCoverageHooks coverage_hooks;
+
+// Thrown by WireReader when the worker ends or misses the deadline mid-answer.
+struct WorkerLost {};
+
+// Writes to the socket: small values buffered, arrays straight from their storage.
+class WireWriter {
+ public:
+  explicit WireWriter(int socket) : socket_(socket) {}
+  template <class T>
+  void Value(const T& value) {
+    static_assert(std::is_trivially_copyable_v<T>);
+    Bytes(&value, sizeof(T));
+  }
+  void Bytes(const void* data, std::size_t size) {
+    if (size >= kDirectBytes) {
+      Flush();
+      Send(data, size);
+      return;
+    }
+    buffer_.append(static_cast<const char*>(data), size);
+    if (buffer_.size() >= kDirectBytes) Flush();
+  }
+  // False when the other end is gone.
+  bool Flush() {
+    Send(buffer_.data(), buffer_.size());
+    buffer_.clear();
+    return ok_;
+  }
+  bool ok() const { return ok_; }
+
+ private:
+  static constexpr std::size_t kDirectBytes = 1 << 16;
+  void Send(const void* data, std::size_t size) {
+    const auto* bytes = static_cast<const char*>(data);
+    while (ok_ && size > 0) {
+      const ssize_t sent = send(socket_, bytes, size, MSG_NOSIGNAL);  // no SIGPIPE if it died
+      if (sent < 0 && errno == EINTR) continue;
+      if (sent <= 0) ok_ = false;
+      if (sent > 0) {
+        bytes += sent;
+        size -= static_cast<std::size_t>(sent);
+      }
+    }
+  }
+  int socket_;
+  std::string buffer_;
+  bool ok_ = true;
+};
+
+// Reads from the socket until a deadline (none: -1 ms); throws WorkerLost when the other end
+// closes or the deadline passes.
+class WireReader {
+ public:
+  WireReader(int socket, int timeout_ms)
+      : socket_(socket),
+        deadline_(std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms)),
+        timed_(timeout_ms >= 0) {}
+  template <class T>
+  T Value() {
+    static_assert(std::is_trivially_copyable_v<T>);
+    T value{};
+    Bytes(&value, sizeof(T));
+    return value;
+  }
+  void Bytes(void* data, std::size_t size) {
+    auto* bytes = static_cast<char*>(data);
+    while (size > 0) {
+      if (timed_) {
+        const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline_ - std::chrono::steady_clock::now());
+        if (left.count() <= 0) throw WorkerLost{};
+        pollfd ready{socket_, POLLIN, 0};
+        const int n = poll(&ready, 1, static_cast<int>(left.count()));
+        if (n < 0 && errno == EINTR) continue;
+        if (n <= 0) throw WorkerLost{};
+      }
+      const ssize_t got = recv(socket_, bytes, size, 0);
+      if (got < 0 && errno == EINTR) continue;
+      if (got <= 0) throw WorkerLost{};
+      bytes += got;
+      size -= static_cast<std::size_t>(got);
+    }
+  }
+  // A count the other side sent, checked against what any answer can hold.
+  std::size_t Count(std::size_t limit) {
+    const std::uint64_t count = Value<std::uint64_t>();
+    HAPCO_ASSERT(count <= limit, "the FCLIB reader's worker sent an implausible size");
+    return static_cast<std::size_t>(count);
+  }
+
+ private:
+  int socket_;
+  std::chrono::steady_clock::time_point deadline_;
+  bool timed_;
+};
+
+// Sizes on the wire are bounded by the largest answer: a dense W of kMaxContacts.
+constexpr std::size_t kMaxWireEntries = std::size_t{9} * kMaxContacts * kMaxContacts;
+
+void Put(WireWriter& out, const std::string& text) {
+  out.Value<std::uint64_t>(text.size());
+  out.Bytes(text.data(), text.size());
+}
+void Get(WireReader& in, std::string* text) {
+  text->resize(in.Count(kMaxWireEntries));
+  in.Bytes(text->data(), text->size());
+}
+void Put(WireWriter& out, const Eigen::VectorXd& vector) {
+  out.Value<std::uint64_t>(static_cast<std::uint64_t>(vector.size()));
+  out.Bytes(vector.data(), sizeof(double) * static_cast<std::size_t>(vector.size()));
+}
+void Get(WireReader& in, Eigen::VectorXd* vector) {
+  vector->resize(static_cast<Eigen::Index>(in.Count(kMaxWireEntries)));
+  in.Bytes(vector->data(), sizeof(double) * static_cast<std::size_t>(vector->size()));
+}
+void Put(WireWriter& out, const Eigen::MatrixXd& matrix) {
+  out.Value<std::uint64_t>(static_cast<std::uint64_t>(matrix.rows()));
+  out.Value<std::uint64_t>(static_cast<std::uint64_t>(matrix.cols()));
+  out.Bytes(matrix.data(), sizeof(double) * static_cast<std::size_t>(matrix.size()));
+}
+void Get(WireReader& in, Eigen::MatrixXd* matrix) {
+  const std::size_t rows = in.Count(kMaxWireEntries), cols = in.Count(kMaxWireEntries);
+  HAPCO_ASSERT(rows == 0 || cols <= kMaxWireEntries / rows, "the FCLIB reader's worker sent an implausible size");
+  matrix->resize(static_cast<Eigen::Index>(rows), static_cast<Eigen::Index>(cols));
+  in.Bytes(matrix->data(), sizeof(double) * rows * cols);
+}
+void Put(WireWriter& out, const Eigen::SparseMatrix<double>& matrix) {
+  Eigen::SparseMatrix<double> compressed = matrix;
+  compressed.makeCompressed();
+  const auto cols = static_cast<std::size_t>(compressed.cols());
+  const auto entries = static_cast<std::size_t>(compressed.nonZeros());
+  out.Value<std::uint64_t>(static_cast<std::uint64_t>(compressed.rows()));
+  out.Value<std::uint64_t>(cols);
+  out.Value<std::uint64_t>(entries);
+  out.Bytes(compressed.outerIndexPtr(), sizeof(int) * (cols + 1));
+  out.Bytes(compressed.innerIndexPtr(), sizeof(int) * entries);
+  out.Bytes(compressed.valuePtr(), sizeof(double) * entries);
+}
+void Get(WireReader& in, Eigen::SparseMatrix<double>* matrix) {
+  const std::size_t rows = in.Count(kMaxWireEntries), cols = in.Count(kMaxWireEntries);
+  const std::size_t entries = in.Count(kMaxWireEntries);
+  std::vector<int> outer(cols + 1), inner(entries);
+  std::vector<double> values(entries);
+  in.Bytes(outer.data(), sizeof(int) * outer.size());
+  in.Bytes(inner.data(), sizeof(int) * inner.size());
+  in.Bytes(values.data(), sizeof(double) * values.size());
+  HAPCO_ASSERT(outer.front() == 0 && static_cast<std::size_t>(outer.back()) == entries,
+               "the FCLIB reader's worker sent an inconsistent sparse matrix");
+  *matrix = Eigen::Map<const Eigen::SparseMatrix<double>>(static_cast<Eigen::Index>(rows), static_cast<Eigen::Index>(cols),
+                                                          static_cast<Eigen::Index>(entries), outer.data(), inner.data(),
+                                                          values.data());
+}
+void Put(WireWriter& out, const FclibInfo& info) {
+  Put(out, info.title);
+  Put(out, info.description);
+  Put(out, info.math_info);
+}
+void Get(WireReader& in, FclibInfo* info) {
+  Get(in, &info->title);
+  Get(in, &info->description);
+  Get(in, &info->math_info);
+}
+void Put(WireWriter& out, const contact::ContactProblem& problem) {
+  Put(out, problem.flexibility_m_per_n);
+  Put(out, problem.free_displacement_m);
+  Put(out, problem.friction_coefficient);
+}
+void Get(WireReader& in, contact::ContactProblem* problem) {
+  Get(in, &problem->flexibility_m_per_n);
+  Get(in, &problem->free_displacement_m);
+  Get(in, &problem->friction_coefficient);
+}
+void Put(WireWriter& out, const FclibFileDetails& details) {
+  Put(out, details.info);
+  out.Value(details.w_storage);
+  out.Value(details.w_stored_entries);
+  out.Value(details.w_relative_asymmetry);
+  Put(out, details.stored_problem);
+}
+void Get(WireReader& in, FclibFileDetails* details) {
+  Get(in, &details->info);
+  details->w_storage = in.Value<MatrixStorage>();
+  details->w_stored_entries = in.Value<int>();
+  details->w_relative_asymmetry = in.Value<double>();
+  Get(in, &details->stored_problem);
+}
+void Put(WireWriter& out, const contact::GlobalContactProblem& problem) {
+  Put(out, problem.m);
+  Put(out, problem.h);
+  Put(out, problem.f);
+  Put(out, problem.w);
+  Put(out, problem.mu);
+}
+void Get(WireReader& in, contact::GlobalContactProblem* problem) {
+  Get(in, &problem->m);
+  Get(in, &problem->h);
+  Get(in, &problem->f);
+  Get(in, &problem->w);
+  Get(in, &problem->mu);
+}
+void Put(WireWriter& out, const FclibGlobalDetails& details) {
+  Put(out, details.info);
+  out.Value(details.m_storage);
+  out.Value(details.h_storage);
+  out.Value(details.h_triplet_reading);
+  out.Value(details.m_stored_entries);
+  out.Value(details.h_stored_entries);
+  out.Value(details.m_relative_asymmetry);
+}
+void Get(WireReader& in, FclibGlobalDetails* details) {
+  Get(in, &details->info);
+  details->m_storage = in.Value<MatrixStorage>();
+  details->h_storage = in.Value<MatrixStorage>();
+  details->h_triplet_reading = in.Value<TripletReading>();
+  details->m_stored_entries = in.Value<int>();
+  details->h_stored_entries = in.Value<int>();
+  details->m_relative_asymmetry = in.Value<double>();
+}
+void Put(WireWriter& out, const FclibSolution& solution) {
+  Put(out, solution.force_n);
+  Put(out, solution.displacement_m);
+}
+void Get(WireReader& in, FclibSolution* solution) {
+  Get(in, &solution->force_n);
+  Get(in, &solution->displacement_m);
+}
+void Put(WireWriter& out, const FclibGlobalSolution& solution) {
+  Put(out, solution.velocity);
+  Put(out, solution.force);
+  Put(out, solution.local_velocity);
+}
+void Get(WireReader& in, FclibGlobalSolution* solution) {
+  Get(in, &solution->velocity);
+  Get(in, &solution->force);
+  Get(in, &solution->local_velocity);
+}
+template <class T>
+void Put(WireWriter& out, const std::optional<T>& value) {
+  out.Value<std::uint8_t>(value.has_value() ? 1 : 0);
+  if (value) Put(out, *value);
+}
+template <class T>
+void Get(WireReader& in, std::optional<T>* value) {
+  value->reset();
+  if (in.Value<std::uint8_t>() != 0) Get(in, &value->emplace());
+}
+
+// The sanitizer runtimes' hook (sanitizer/common_interface_defs.h), declared weak so that a
+// build without sanitizers links without it.
+extern "C" void __sanitizer_set_death_callback(void (*callback)(void)) __attribute__((weak));
+
+// In a sanitizer build's worker, for a report (ASan or UBSan): true when a frame of the
+// reporting stack is in HDF5 (its memory errors on corrupt heaps, finding 9) and none of the
+// frames between the report and HDF5 is outside this program and the C library. A SIGSEGV never
+// gets here: the worker's default action ends it first. Known gap: a report in a callback HDF5
+// calls (H5Literate's, in this program) counts as HDF5's.
+bool ReportIsInHdf5() {
+  void* frames[128];
+  const int count = backtrace(frames, 128);
+  Dl_info self{};
+  if (dladdr(reinterpret_cast<void*>(&ReportIsInHdf5), &self) == 0) return false;
+  for (int k = 0; k < count; ++k) {
+    Dl_info frame{};
+    if (dladdr(frames[k], &frame) == 0 || frame.dli_fname == nullptr) continue;
+    if (frame.dli_fbase == self.dli_fbase) continue;  // this program, with the sanitizer runtime
+    const std::string_view module(frame.dli_fname);
+    if (module.find("/libc.so") != std::string_view::npos) continue;  // memcpy, signal frames
+    return module.find("libhdf5") != std::string_view::npos;
+  }
+  return false;
+}
+
+void OnSanitizerDeathInWorker() {
+  if (ReportIsInHdf5()) {
+    std::signal(SIGSEGV, SIG_DFL);
+    std::raise(SIGSEGV);  // as the release build's HDF5 crash: the file is refused
+  }
+  std::fflush(stderr);
+  std::_Exit(kWorkerBugExitCode);  // a HapCo bug: a finding for a fuzzer
+}
+
+class ReaderWorker {
+ public:
+  ~ReaderWorker() { Stop(); }
+
+  // Runs `request` on `path` in the worker: `send` adds the request's data, `receive` reads the
+  // result. False when no worker process can be started (the caller then reads in-process).
+  // Throws what the read threw (InputError, std::bad_alloc), or InputError when HDF5 crashed,
+  // looped or grew on the file.
+  bool Run(Request request, const std::string& path, const std::function<void(WireWriter&)>& send,
+           const std::function<void(WireReader&)>& receive) {
+    if (socket_ < 0 && !Start()) return false;
+    std::error_code size_error;
+    const std::uintmax_t file_size = std::filesystem::file_size(path, size_error);
+    const long long file_bytes = size_error ? 0 : static_cast<long long>(file_size);
+    const long long before_bytes = ResidentBytes(pid_);  // HDF5's free lists keep memory between files
+    const long long memory_limit = before_bytes + kChecksMemoryBytes + kChecksMemoryPerFileByte * file_bytes;
+    {
+      WireWriter out(socket_);
+      out.Value(request);
+      Put(out, path);
+      if (send) send(out);
+      if (!out.Flush()) WorkerEnded(path, Stop());
+    }
+    const Wait wait = AwaitAnswer(memory_limit);
+    if (wait == Wait::kTooMuchMemory || wait == Wait::kTimeout) {
+      kill(pid_, SIGKILL);
+      Stop();
+      if (wait == Wait::kTooMuchMemory) {
+        Fail(path, "HDF5 needed more than " + std::to_string((memory_limit - before_bytes) >> 20) + " MiB to read this " +
+                       std::to_string(file_bytes) + "-byte file: refused as corrupt");
+      }
+      Fail(path, "HDF5 did not finish reading the file within " + std::to_string(kChecksTimeoutMs / 1000) +
+                     " s: refused as corrupt");
+    }
+    std::optional<InputError> refusal;
+    bool out_of_memory = false;
+    try {
+      WireReader in(socket_, kReadTimeoutMs);
+      const auto answer = in.Value<Answer>();
+      if (answer == Answer::kResult) {
+        if (receive) receive(in);
+      } else if (answer == Answer::kInputError) {
+        std::string message;
+        Get(in, &message);
+        refusal.emplace(message);
+      } else {
+        HAPCO_ASSERT(answer == Answer::kOutOfMemory, "the FCLIB reader's worker sent an unknown answer");
+        out_of_memory = true;
+      }
+      std::string coverage;
+      Get(in, &coverage);
+      if (!coverage.empty() && coverage_hooks.merge != nullptr) coverage_hooks.merge(coverage);
+    } catch (const WorkerLost&) {
+      kill(pid_, SIGKILL);  // (a no-op when it ended by itself; its status says how)
+      WorkerEnded(path, Stop());
+    }
+    if (++requests_ >= kRequestsPerWorker || ResidentBytes(pid_) > started_bytes_ + kWorkerGrowthBytes) Stop();
+    if (refusal) throw *refusal;
+    if (out_of_memory) throw std::bad_alloc();
+    return true;
+  }
+
+ private:
+  bool Start() {
+    int ends[2] = {-1, -1};
+    if (socketpair(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0, ends) != 0) return false;
+    std::fflush(nullptr);
+    const pid_t child = fork();
+    if (child < 0) {
+      close(ends[0]);
+      close(ends[1]);
+      return false;
+    }
+    if (child == 0) {
+      close(ends[0]);
+      Serve(ends[1]);
+    }
+    close(ends[1]);
+    pid_ = child;
+    socket_ = ends[0];
+    requests_ = 0;
+    started_bytes_ = ResidentBytes(pid_);
+    return true;
+  }
+
+  // Resident set of a process (/proc/PID/statm), bytes; 0 when it cannot be read.
+  static long long ResidentBytes(pid_t pid) {
+    std::ifstream statm("/proc/" + std::to_string(pid) + "/statm");
+    long long pages = 0, resident = 0;
+    if (!(statm >> pages >> resident)) return 0;
+    return resident * sysconf(_SC_PAGESIZE);
+  }
+
+  // The worker: requests in, answers out, until the reader closes its end.
+  [[noreturn]] static void Serve(int socket) {
+    prctl(PR_SET_PDEATHSIG, SIGKILL);
+    // A crash must end the worker by its signal, not in a sanitizer's or fuzzer's handler
+    // (libFuzzer's, inherited over fork, wrote bogus crash files and could deadlock in the
+    // child on a lock of a thread the child does not have: finding 12).
+    for (const int signal_number : {SIGSEGV, SIGBUS, SIGFPE, SIGILL, SIGABRT, SIGTRAP}) {
+      std::signal(signal_number, SIG_DFL);
+    }
+    // A sanitizer's report (libFuzzer's callback would write the unit it holds as a crash file:
+    // from the worker, a bogus one); weak, absent outside sanitizer builds.
+    if (__sanitizer_set_death_callback != nullptr) {
+      void* warm_up[1];
+      backtrace(warm_up, 1);  // loads the unwinder now, not inside a report
+      __sanitizer_set_death_callback(&OnSanitizerDeathInWorker);
+    }
+    SetAssertionExitCode(kWorkerBugExitCode);
+    worker_socket = socket;
+    for (;;) {
+      Request request{};
+      std::string path;
+      Eigen::VectorXd force_n, displacement_m;
+      FclibGlobalSolution global_solution_to_write;
+      try {
+        WireReader in(socket, -1);
+        request = in.Value<Request>();
+        Get(in, &path);
+        if (request == Request::kWriteLocalSolution) {
+          Get(in, &force_n);
+          Get(in, &displacement_m);
+        } else if (request == Request::kWriteGlobalSolution) {
+          Get(in, &global_solution_to_write);
+        }
+      } catch (const WorkerLost&) {
+        std::_Exit(0);  // the reader closed its end
+      }
+      if (coverage_hooks.reset != nullptr) coverage_hooks.reset();
+      // The read first, the answer after: an InputError may come from anywhere in it.
+      FclibKind kind = FclibKind::kLocal;
+      contact::ContactProblem local;
+      FclibFileDetails local_details;
+      std::optional<FclibSolution> local_solution;
+      contact::GlobalContactProblem global;
+      FclibGlobalDetails global_details;
+      std::optional<FclibGlobalSolution> global_solution;
+      Answer answer = Answer::kResult;
+      std::string refusal;
+      try {
+        switch (request) {
+          case Request::kKind: kind = KindInProcess(path); break;
+          case Request::kLocalProblem: local = ReadLocalProblemInProcess(path, &local_details); break;
+          case Request::kLocalSolution: local_solution = ReadLocalSolutionInProcess(path); break;
+          case Request::kGlobalProblem: global = ReadGlobalProblemInProcess(path, &global_details); break;
+          case Request::kGlobalSolution: global_solution = ReadGlobalSolutionInProcess(path); break;
+          case Request::kWriteLocalSolution: WriteLocalSolutionInProcess(path, force_n, displacement_m); break;
+          case Request::kWriteGlobalSolution: WriteGlobalSolutionInProcess(path, global_solution_to_write); break;
+          default: HAPCO_ASSERT(false, "the FCLIB reader's worker got an unknown request");
+        }
+      } catch (const InputError& error) {
+        answer = Answer::kInputError;
+        refusal = error.what();
+      } catch (const std::bad_alloc&) {
+        answer = Answer::kOutOfMemory;
+      }
+      // Every identifier a read opened is closed again, on every path (HDF5 keeps open ones
+      // reachable, so a leak checker cannot see a forgotten one).
+      HAPCO_ASSERT(H5Fget_obj_count(H5F_OBJ_ALL, H5F_OBJ_ALL) == 0, "an FCLIB read left an HDF5 identifier open");
+      WireWriter out(socket);
+      out.Value(answer);
+      if (answer == Answer::kInputError) Put(out, refusal);
+      if (answer == Answer::kResult) {
+        switch (request) {
+          case Request::kKind: out.Value(kind); break;
+          case Request::kLocalProblem: Put(out, local), Put(out, local_details); break;
+          case Request::kLocalSolution: Put(out, local_solution); break;
+          case Request::kGlobalProblem: Put(out, global), Put(out, global_details); break;
+          case Request::kGlobalSolution: Put(out, global_solution); break;
+          default: break;  // writes: nothing to return
+        }
+      }
+      Put(out, coverage_hooks.collect != nullptr ? coverage_hooks.collect() : std::string());
+      if (!out.Flush()) std::_Exit(0);
+    }
+  }
+
+  enum class Wait { kAnswer, kTimeout, kTooMuchMemory };
+  // Waits for the start of the answer (or the worker's end): for the checks at most
+  // kChecksTimeoutMs, looking at the worker's resident memory every kMemoryCheckMs; after the
+  // worker's MarkChecked at most kReadTimeoutMs, memory unwatched. A signal (EINTR) resumes the
+  // wait for the time left, not a fresh limit: libFuzzer's timer interrupts every 16 s, and
+  // restarting let a file HDF5 reads for minutes outlive the limit (finding 13).
+  Wait AwaitAnswer(long long memory_limit_bytes) const {
+    bool checked = false;
+    auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(kChecksTimeoutMs);
+    for (;;) {
+      const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
+      if (left.count() <= 0) return Wait::kTimeout;
+      pollfd ready{socket_, POLLIN, 0};
+      const int n = poll(&ready, 1, static_cast<int>(checked ? left.count() : std::min<long long>(left.count(), kMemoryCheckMs)));
+      if (n < 0 && errno == EINTR) continue;
+      if (n > 0) {
+        char mark = 0;
+        if (checked || recv(socket_, &mark, 1, MSG_PEEK) != 1 || mark != kCheckedMark) return Wait::kAnswer;
+        recv(socket_, &mark, 1, 0);  // the mark itself
+        checked = true;
+        deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(kReadTimeoutMs);
+        continue;
+      }
+      if (!checked && ResidentBytes(pid_) > memory_limit_bytes) return Wait::kTooMuchMemory;
+    }
+  }
+
+  // The worker ended during a request: by a signal if a library crashed on the file.
+  [[noreturn]] static void WorkerEnded(const std::string& path, int status) {
+    if (WIFSIGNALED(status)) {
+      Fail(path, std::string("HDF5 crashed reading the file (") + strsignal(WTERMSIG(status)) + "): it is corrupt");
+    }
+    const std::string what =
+        WIFEXITED(status) && WEXITSTATUS(status) == kWorkerBugExitCode
+            ? "the FCLIB reader's worker failed a check of its own (a HapCo bug: its message is above)"
+            : "the FCLIB reader's worker ended for another reason than the file (exit status " +
+                  std::to_string(WIFEXITED(status) ? WEXITSTATUS(status) : -1) + ")";
+    HAPCO_ASSERT(false, what.c_str());
+  }
+
+  // Closes the worker's socket (it exits) and reaps it; returns its wait status.
+  int Stop() {
+    if (socket_ >= 0) close(socket_);
+    socket_ = -1;
+    int status = 0;
+    if (pid_ > 0) {
+      while (waitpid(pid_, &status, 0) < 0 && errno == EINTR) {
+      }
+    }
+    pid_ = -1;
+    return status;
+  }
+
+  pid_t pid_ = -1;
+  int socket_ = -1;
+  int requests_ = 0;
+  long long started_bytes_ = 0;
+};
+
+ReaderWorker& Worker() {
+  static ReaderWorker worker;
+  return worker;
+}
+
+}  // namespace
+
+void SetWorkerCoverageHooks(const WorkerCoverageHooks& hooks) { coverage_hooks = hooks; }
+
+FclibKind ReadFclibKind(const std::string& path) {
+  FclibKind kind = FclibKind::kLocal;
+  if (!Worker().Run(Request::kKind, path, nullptr, [&](WireReader& in) { kind = in.Value<FclibKind>(); })) {
+    kind = KindInProcess(path);
+  }
+  return kind;
+}
+
+contact::ContactProblem ReadFclibLocalProblem(const std::string& path, FclibFileDetails* details) {
+  contact::ContactProblem problem;
+  FclibFileDetails read_details;
+  if (!Worker().Run(Request::kLocalProblem, path, nullptr, [&](WireReader& in) {
+        Get(in, &problem);
+        Get(in, &read_details);
+      })) {
+    problem = ReadLocalProblemInProcess(path, &read_details);
+  }
+  if (details != nullptr) *details = std::move(read_details);
+  return problem;
+}
+
+std::optional<FclibSolution> ReadFclibSolution(const std::string& path) {
+  std::optional<FclibSolution> solution;
+  if (!Worker().Run(Request::kLocalSolution, path, nullptr, [&](WireReader& in) { Get(in, &solution); })) {
+    solution = ReadLocalSolutionInProcess(path);
+  }
+  return solution;
+}
+
+void WriteFclibSolution(const std::string& path, const Eigen::VectorXd& force_n, const Eigen::VectorXd& displacement_m) {
+  if (!Worker().Run(
+          Request::kWriteLocalSolution, path,
+          [&](WireWriter& out) {
+            Put(out, force_n);
+            Put(out, displacement_m);
+          },
+          nullptr)) {
+    WriteLocalSolutionInProcess(path, force_n, displacement_m);
+  }
+}
+
+contact::GlobalContactProblem ReadFclibGlobalProblem(const std::string& path, FclibGlobalDetails* details) {
+  contact::GlobalContactProblem problem;
+  FclibGlobalDetails read_details;
+  if (!Worker().Run(Request::kGlobalProblem, path, nullptr, [&](WireReader& in) {
+        Get(in, &problem);
+        Get(in, &read_details);
+      })) {
+    problem = ReadGlobalProblemInProcess(path, &read_details);
+  }
+  if (details != nullptr) *details = std::move(read_details);
+  return problem;
+}
+
+std::optional<FclibGlobalSolution> ReadFclibGlobalSolution(const std::string& path) {
+  std::optional<FclibGlobalSolution> solution;
+  if (!Worker().Run(Request::kGlobalSolution, path, nullptr, [&](WireReader& in) { Get(in, &solution); })) {
+    solution = ReadGlobalSolutionInProcess(path);
+  }
+  return solution;
+}
+
+void WriteFclibGlobalSolution(const std::string& path, const FclibGlobalSolution& solution) {
+  if (!Worker().Run(Request::kWriteGlobalSolution, path, [&](WireWriter& out) { Put(out, solution); }, nullptr)) {
+    WriteGlobalSolutionInProcess(path, solution);
+  }
 }
 
 }  // namespace hapco::fclib

@@ -21,7 +21,12 @@
 //
 // Every failure throws hapco::InputError naming the file and what is wrong. The file is
 // checked with HDF5 before libfclib sees it, because libfclib calls exit(1) on a malformed
-// file. HDF5's automatic error-stack printing is switched off process-wide on first use.
+// file. Every access to an existing file (reads, a solution written into it) runs in a worker
+// process forked on first use, because HDF5 itself crashes, loops or grows without bound on
+// some corrupt files: only the parsed result comes back (fclib_io.cc, docs/fuzzing.md). Not
+// for use from several threads at once. HDF5's automatic error-stack printing is switched off
+// process-wide on first use.
+#include <string_view>
 #include <Eigen/Dense>
 
 #include <optional>
@@ -150,5 +155,16 @@ struct FclibGlobalSolution {
 void WriteFclibGlobalSolution(const std::string& path, const FclibGlobalSolution& solution);
 // The /solution of a global-problem file, std::nullopt when it has none.
 std::optional<FclibGlobalSolution> ReadFclibGlobalSolution(const std::string& path);
+
+// For coverage-guided fuzzing (tests/fuzz/fclib_local_target.cc): the reads run in the worker
+// process, whose coverage an in-process fuzzer does not see. A harness sets these before the
+// first read: `reset` and `collect` run in the worker before and after each request, and the
+// bytes `collect` returns go back with the answer to `merge`, in the reading process.
+struct WorkerCoverageHooks {
+  void (*reset)() = nullptr;
+  std::string (*collect)() = nullptr;
+  void (*merge)(std::string_view coverage) = nullptr;
+};
+void SetWorkerCoverageHooks(const WorkerCoverageHooks& hooks);
 
 }  // namespace hapco::fclib

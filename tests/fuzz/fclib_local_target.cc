@@ -7,12 +7,6 @@
 //   otherwise:   the bytes are the file itself (mutated seed files: damaged HDF5).
 // Either way the file goes to a per-process path on /dev/shm (tmpfs) when it exists.
 #include <hdf5.h>
-#if defined(__has_feature)
-#if __has_feature(address_sanitizer)
-#define HAPCO_FUZZ_WITH_ASAN 1
-#include <sanitizer/asan_interface.h>
-#endif
-#endif
 #include <unistd.h>
 
 #include <algorithm>
@@ -22,6 +16,7 @@
 #include <cstring>
 #include <limits>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "common/error.h"
@@ -31,45 +26,39 @@
 namespace hapco::fuzz {
 namespace {
 
-// fclib_io probes every file in a worker process first (a child of this fuzzer) because HDF5
-// 1.10.8 has memory errors of its own on corrupt files (finding 9: a memcpy of size -1 from a
-// corrupt local heap under H5Literate). A release build's worker dies by SIGSEGV there and the
-// file is refused; under ASan the report would end the worker with an exit code instead, which
-// the reader takes as a failure of its own. So in the worker, and only for a report whose first
-// frame outside the sanitizer is in libhdf5, the worker ends by SIGSEGV as in production; any
-// other report (our code, or in the fuzzer's own process) stays a finding.
-const pid_t kFuzzerPid = getpid();
-
-bool FirstFrameIsInHdf5(const char* report) {
-  const char* frame = std::strstr(report, "#0 ");
-  for (int k = 0; frame != nullptr && k < 4; ++k, frame = std::strstr(frame + 1, "\n    #")) {
-    const char* end = std::strchr(frame + 1, '\n');
-    const std::string line(frame, end != nullptr ? static_cast<std::size_t>(end - frame) : std::strlen(frame));
-    if (line.find("__interceptor_") != std::string::npos || line.find("__asan") != std::string::npos ||
-        line.find("__sanitizer") != std::string::npos) {
-      continue;  // the sanitizer's own frames
-    }
-    return line.find("libhdf5") != std::string::npos;
-  }
-  return false;
+// fclib_io reads every file in a worker process (a fork of this fuzzer, fclib_io.cc), so the
+// reader's code runs there, out of libFuzzer's sight: the worker sends its coverage counters
+// back with every answer and they are added to this process's (the inline 8-bit counters that
+// -fsanitize=fuzzer-no-link places between these linker-made symbols; absent, i.e. null, in
+// the release replay build). libFuzzer's comparison tracing of the worker is not carried over.
+// A memory error the worker hits in HDF5 refuses the file (as the release build's crash does);
+// any other sanitizer report there ends the worker as a HapCo bug, which aborts this process:
+// a finding (fclib_io.cc, OnSanitizerDeathInWorker).
+extern "C" {
+extern std::uint8_t __start___sancov_cntrs[] __attribute__((weak));
+extern std::uint8_t __stop___sancov_cntrs[] __attribute__((weak));
 }
 
-void OnSanitizerReport(const char* report) {
-  if (getpid() != kFuzzerPid && FirstFrameIsInHdf5(report)) {
-    std::signal(SIGSEGV, SIG_DFL);
-    std::raise(SIGSEGV);
+std::size_t CounterBytes() {
+  return __start___sancov_cntrs == nullptr ? 0 : static_cast<std::size_t>(__stop___sancov_cntrs - __start___sancov_cntrs);
+}
+void ResetWorkerCoverage() { std::memset(__start___sancov_cntrs, 0, CounterBytes()); }
+std::string CollectWorkerCoverage() {
+  return std::string(reinterpret_cast<const char*>(__start___sancov_cntrs), CounterBytes());
+}
+void MergeWorkerCoverage(std::string_view coverage) {
+  HAPCO_FUZZ_CHECK(coverage.size() == CounterBytes(), "the worker's counters differ from this process's");
+  for (std::size_t k = 0; k < coverage.size(); ++k) {
+    const unsigned sum = __start___sancov_cntrs[k] + static_cast<std::uint8_t>(coverage[k]);
+    __start___sancov_cntrs[k] = static_cast<std::uint8_t>(std::min(sum, 255u));
   }
 }
-
-#ifdef HAPCO_FUZZ_WITH_ASAN
-const bool kReportCallbackInstalled = [] {
-  __asan_set_error_report_callback(OnSanitizerReport);
+[[maybe_unused]] const bool kCoverageHooksInstalled = [] {
+  if (CounterBytes() > 0) {
+    fclib::SetWorkerCoverageHooks({&ResetWorkerCoverage, &CollectWorkerCoverage, &MergeWorkerCoverage});
+  }
   return true;
 }();
-#else
-// The release build replays the findings without ASan (fuzz_replay_test): nothing to hook.
-[[maybe_unused]] const auto kUnusedHook = &OnSanitizerReport;
-#endif
 
 std::string ScratchPath() {
   const char* dir = access("/dev/shm", W_OK) == 0 ? "/dev/shm" : "/tmp";
@@ -280,7 +269,8 @@ int FclibLocal(const std::uint8_t* data, std::size_t size) {
   }
   // HDF5 keeps every open identifier reachable, so LeakSanitizer cannot see one that
   // fclib_io forgot to close (and HDF5's own leaks on corrupt files are suppressed,
-  // tests/fuzz/lsan.supp): count them instead.
+  // tests/fuzz/lsan.supp): count them instead. The worker checks its own after every read;
+  // here, the layout writer's and anything the reader opened in this process.
   HAPCO_FUZZ_CHECK(H5Fget_obj_count(H5F_OBJ_ALL, H5F_OBJ_ALL) == 0, "an HDF5 identifier was left open");
   std::remove(path.c_str());
   return 0;

@@ -377,6 +377,31 @@ TEST(FclibSolution, WriteReadAndReplace) {
   ExpectSameProblem(KnownProblem(), ReadFclibLocalProblem(path));  // problem untouched
 }
 
+// Every access to an existing file runs in the reader's worker process (fclib_io.cc), a
+// solution written into it too: writing into a file on which HDF5 crashes is refused (the test
+// process lives), and the reads and writes after it, in a fresh worker, are exact.
+TEST(FclibSolution, WritingIntoAFileThatCrashesHdf5IsRefusedAndLaterAccessesAreExact) {
+  const std::string crashing = ScratchFile(".h5");
+  std::filesystem::copy_file(std::string(HAPCO_SOURCE_DIR) + "/tests/data/fuzz/fclib_local/hdf5_segv_in_link_lookup.h5",
+                             crashing, std::filesystem::copy_options::overwrite_existing);
+  const Eigen::VectorXd r = Eigen::VectorXd::LinSpaced(9, 0.1, 0.9);
+  const Eigen::VectorXd u = Eigen::VectorXd::LinSpaced(9, -1.0, 1.0);
+  try {
+    WriteFclibSolution(crashing, r, u);
+    ADD_FAILURE() << "no InputError writing into " << crashing;
+  } catch (const InputError& error) {
+    EXPECT_NE(std::string(error.what()).find("HDF5 crashed reading the file"), std::string::npos) << error.what();
+  }
+  const std::string path = ScratchFile(".hdf5");
+  WriteFclibLocalProblem(path, KnownProblem());
+  WriteFclibSolution(path, r, u);
+  ExpectSameProblem(KnownProblem(), ReadFclibLocalProblem(path));
+  const auto read = ReadFclibSolution(path);
+  ASSERT_TRUE(read.has_value());
+  EXPECT_EQ(read->force_n, r);
+  EXPECT_EQ(read->displacement_m, u);
+}
+
 TEST(FclibSolution, RejectsWrongSizesAndBadFiles) {
   const std::string path = ScratchFile(".hdf5");
   WriteFclibLocalProblem(path, KnownProblem());
