@@ -284,7 +284,7 @@ TEST(FclibRead, FileThatCrashesHdf5IsRefused) {
 
 // Found by the long fuzz run (tests/data/fuzz/fclib_local): HDF5 1.10.8 copies -1 bytes out
 // of a corrupt local heap while listing a group (H5Literate): a memory error inside libhdf5
-// (SIGSEGV in a release build), contained by the probe worker: refused, the process lives.
+// (SIGSEGV in a release build), contained by the reader's worker process: refused, the process lives.
 TEST(FclibRead, FileOnWhichHdf5CopiesANegativeSizeIsRefused) {
   const std::string file = std::string(HAPCO_SOURCE_DIR) + "/tests/data/fuzz/fclib_local/hdf5_memcpy_negative_size_in_heap.h5";
   ExpectInputError(file, "HDF5 crashed reading the file");
@@ -293,7 +293,7 @@ TEST(FclibRead, FileOnWhichHdf5CopiesANegativeSizeIsRefused) {
 // Found by the long fuzz run (findings 13 and 14, tests/data/fuzz/fclib_local): on this
 // 2448-byte file HDF5 1.10.8 builds a local heap's free list block by block, 5 GB in 20 s
 // (H5Lexists). The reader's 20 s limit did not hold under a periodic signal (libFuzzer's timer
-// restarted the wait); now the probe worker is also stopped once it holds 64 MiB (+ 16 x the
+// restarted the wait); now the reader's worker is also stopped once it holds 64 MiB (+ 16 x the
 // file) more than before the file, and the file is refused at once instead of after 5 GB.
 TEST(FclibRead, FileOnWhichHdf5BuildsGigabytesIsRefusedByItsMemory) {
   const std::string file = std::string(HAPCO_SOURCE_DIR) + "/tests/data/fuzz/fclib_local/hdf5_read_outlasts_the_limit.h5";
