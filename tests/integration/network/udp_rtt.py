@@ -9,8 +9,9 @@
       HZ, each carrying its send time; waits for stragglers; writes sent, received and the
       round trips (ms) to FILE.
   udp_rtt.py check --base B.json --impaired I.json --server S.json --rtt-added-ms R
-                   --loss-pct L --rtt-tolerance-ms T
-      asserts the impaired median round trip exceeds the baseline's by R (within T) and that
+                   --loss-pct L --rtt-tolerance-ms T [--netdelay-log LOG]
+      asserts the impaired median round trip exceeds the baseline's by R (within T, plus the
+      release lateness hapco-netdelay measured and printed in LOG) and that
       the loss of each direction is inside the binomial bounds for L % (false alarm < 1e-6
       per bound).
 """
@@ -18,6 +19,7 @@ import argparse
 import json
 import math
 import os
+import re
 import select
 import signal
 import socket
@@ -154,6 +156,12 @@ def binomial_bounds(n, p, alpha):
     return lo, hi
 
 
+def netdelay_lateness_ms(path):
+    """The mean release lateness (ms) of each hapco-netdelay summary line in netlab's log."""
+    pattern = re.compile(r"hapco-netdelay: summary:.*release lateness mean ([0-9.]+) ms")
+    return [float(m.group(1)) for m in map(pattern.search, open(path)) if m]
+
+
 def check(args):
     base = json.load(open(args.base))
     imp = json.load(open(args.impaired))
@@ -162,11 +170,21 @@ def check(args):
     base_med = statistics.median(base["rtt_ms"])
     imp_med = statistics.median(imp["rtt_ms"])
     added = imp_med - base_med
+    # The delay tool releases each packet at its deadline plus its own wake-up lateness, which
+    # it measures and prints per direction; on a machine whose vCPUs stall (a CI VM: 0.8-0.9 ms
+    # mean, 16 ms max seen at SCHED_FIFO) that lateness is real added delay. The tool wakes twice
+    # per packet (when the kernel queues it, and at its release deadline) and measures only the
+    # second, so the upper bound adds twice what it measured instead of assuming an idle machine.
+    lateness = netdelay_lateness_ms(args.netdelay_log) if args.netdelay_log else []
+    upper = args.rtt_tolerance_ms + 2.0 * sum(lateness)
+    if lateness:
+        print("check: delay tool's measured release lateness, mean per direction: %s ms (twice their sum "
+              "added to the upper tolerance)" % " + ".join("%.3f" % v for v in lateness))
     print("check: baseline median %.3f ms, impaired median %.3f ms: +%.3f ms (injected +%.3f ms, tolerance "
-          "-%.2f/+%.2f ms)" % (base_med, imp_med, added, args.rtt_added_ms, args.early_tolerance_ms,
-                                args.rtt_tolerance_ms))
-    if not (args.rtt_added_ms - args.early_tolerance_ms <= added <= args.rtt_added_ms + args.rtt_tolerance_ms):
-        failures.append("round trip grew by %.3f ms, expected %.3f ms" % (added, args.rtt_added_ms))
+          "-%.2f/+%.2f ms)" % (base_med, imp_med, added, args.rtt_added_ms, args.early_tolerance_ms, upper))
+    if not (args.rtt_added_ms - args.early_tolerance_ms <= added <= args.rtt_added_ms + upper):
+        failures.append("round trip grew by %.3f ms, expected %.3f ms (+%.3f ms at most)" %
+                        (added, args.rtt_added_ms, upper))
     # Every impaired round trip must be at least the injected delay (nothing leaves early).
     floor = min(imp["rtt_ms"])
     print("check: impaired minimum round trip %.3f ms" % floor)
@@ -213,6 +231,7 @@ def main():
     k.add_argument("--rtt-tolerance-ms", type=float, default=0.5)
     k.add_argument("--early-tolerance-ms", type=float, default=0.05)
     k.add_argument("--loss-pct", type=float, required=True)
+    k.add_argument("--netdelay-log", help="netlab's output of the impaired run (hapco-netdelay summaries)")
     args = parser.parse_args()
     return {"server": server, "client": client, "check": check}[args.mode](args)
 
