@@ -4,6 +4,8 @@ find_package(Protobuf REQUIRED)
 find_package(CycloneDDS REQUIRED)
 find_package(Threads REQUIRED)
 find_package(PkgConfig REQUIRED)
+# LAPACK (liblapack-dev; OpenBLAS's when installed): dpotri for the contact compliance block.
+find_package(LAPACK REQUIRED)
 
 # CHOLMOD (SuiteSparse 5.x on Debian 12 ships no CMake config): an imported target by hand.
 find_path(CHOLMOD_INCLUDE_DIR cholmod.h PATH_SUFFIXES suitesparse REQUIRED)

@@ -70,9 +70,15 @@ class ElasticBody {
 
   // Compliance block of a node set S (3|S| x 3|S|, m/N): C(3i+a, 3j+b) = displacement of node
   // S[i] along axis a for a unit force at node S[j] along axis b, all Dirichlet dofs held at
-  // zero. Rows/columns of Dirichlet nodes are zero. Solves for several right-hand sides at a
-  // time, in chunks sized so the dense work arrays stay below ~64 MB.
+  // zero. Rows/columns of Dirichlet nodes are zero. Computed as the inverse of the Schur
+  // complement of the free dofs of S (a second CHOLMOD factorization with S ordered last, then
+  // LAPACK dpotri): one factorization plus O(m^3) for m free dofs in S, and a transient dense
+  // m x m array (8 m^2 bytes) besides the body's factor.
   Eigen::MatrixXd ComplianceBlock(std::span<const int> nodes) const;
+  // The same block by 3|S| batched solves with the body's factor (the method before the Schur
+  // complement one): O(|S| nnz(L)). Kept as the baseline of fem_bench and a second, independent
+  // computation for the tests; the simulation uses ComplianceBlock.
+  Eigen::MatrixXd ComplianceBlockBySolves(std::span<const int> nodes) const;
   // The same block a column at a time, for callers that store it in their own layout without
   // a dense copy: sink(c, column) receives each column c (0 <= c < 3|S|, length 3|S|) once;
   // columns of Dirichlet dofs are never sent (they are zero).
@@ -92,6 +98,8 @@ class ElasticBody {
 
   void CheckNodes(std::span<const int> nodes, const char* what) const;
   void CheckRigidMotionsStopped() const;
+  // K_ff (free dofs only, lower triangle stored), N/m.
+  Eigen::SparseMatrix<double> FreeStiffnessLower() const;
   // Solves K_ff X = B for free-dof right-hand sides (columns).
   Eigen::MatrixXd SolveFree(const Eigen::MatrixXd& rhs_free) const;
 

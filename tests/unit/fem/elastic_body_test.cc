@@ -1,4 +1,6 @@
 // ElasticBody: consistency of its queries with each other and with an independent solve.
+#include <algorithm>
+#include <numeric>
 #include <random>
 #include <set>
 
@@ -114,6 +116,35 @@ TEST_P(ElasticBodyTest, ComplianceBlockIsSymmetricAndMatchesUnitLoadSolves) {
       EXPECT_GT(c(3 * i + 2, 3 * i + 2), 0.0);  // pushing a free node moves it that way
     }
   }
+}
+
+// The Schur-complement block (a factorization with the set ordered last, then dpotri) against
+// 3|S| solves with the body's own factor: two independent computations of (K_ff^-1)_SS. Sets:
+// shuffled boundary nodes with repeats and Dirichlet nodes, every node of the body (no
+// interior left to eliminate), and Dirichlet nodes only (no free dof: all zero).
+TEST_P(ElasticBodyTest, SchurComplementBlockMatchesBatchedSolves) {
+  const Scene scene = MakeScene(GetParam(), true);
+  const ElasticBody& body = scene.body;
+  std::vector<int> boundary;
+  for (const BoxFace face : {BoxFace::kZMax, BoxFace::kYMin, BoxFace::kXMax})
+    for (int n : NodesOnBoxFace(body.mesh(), scene.spec, face)) boundary.push_back(n);
+  std::mt19937 rng(3);
+  std::shuffle(boundary.begin(), boundary.end(), rng);
+  boundary.push_back(boundary[5]);
+  std::vector<int> every(static_cast<std::size_t>(body.mesh().num_nodes()));
+  std::iota(every.begin(), every.end(), 0);
+  const std::vector<int> dirichlet_only = body.clamped_nodes();
+  for (const std::vector<int>* set : std::initializer_list<const std::vector<int>*>{&boundary, &every, &dirichlet_only}) {
+    const Eigen::MatrixXd schur = body.ComplianceBlock(*set);
+    const Eigen::MatrixXd solves = body.ComplianceBlockBySolves(*set);
+    ASSERT_EQ(schur.rows(), 3 * static_cast<Eigen::Index>(set->size()));
+    ASSERT_EQ(solves.rows(), schur.rows());
+    EXPECT_LE((schur - solves).cwiseAbs().maxCoeff(), 1e-10 * std::max(solves.cwiseAbs().maxCoeff(), 1e-300))
+        << set->size() << " nodes";
+    EXPECT_EQ(schur.transpose(), schur);
+  }
+  EXPECT_EQ(body.ComplianceBlock(dirichlet_only).norm(), 0.0);
+  EXPECT_GT(body.ComplianceBlock(every).norm(), 0.0);
 }
 
 TEST_P(ElasticBodyTest, ReactionsBalanceTheAppliedLoads) {
