@@ -34,10 +34,87 @@ class SupernodalLlt : public Eigen::CholmodSupernodalLLT<Eigen::SparseMatrix<dou
   const cholmod_factor* factor() const { return m_cholmodFactor; }
 };
 
+// A CHOLMOD workspace that is freed on every path out.
+struct CholmodSession {
+  cholmod_common common{};
+  cholmod_factor* factor = nullptr;
+  CholmodSession() { cholmod_start(&common); }
+  ~CholmodSession() {
+    if (factor != nullptr) cholmod_free_factor(&factor, &common);
+    cholmod_finish(&common);
+  }
+  CholmodSession(const CholmodSession&) = delete;
+  CholmodSession& operator=(const CholmodSession&) = delete;
+};
+
+// CHOLMOD's fill-reducing order of K_ff (its default choice among AMD and METIS), from a
+// symbolic analysis only.
+std::vector<int> FillReducingOrder(const Eigen::SparseMatrix<double>& k_ff_lower) {
+  cholmod_sparse a = Eigen::viewAsCholmod(k_ff_lower.selfadjointView<Eigen::Lower>());
+  CholmodSession cholmod;
+  cholmod.factor = cholmod_analyze(&a, &cholmod.common);
+  HAPCO_ASSERT(cholmod.factor != nullptr, "CHOLMOD analysis of K_ff failed");
+  const int* perm = static_cast<const int*>(cholmod.factor->Perm);
+  return {perm, perm + a.nrow};
+}
+
+// `order` with the dofs flagged in `last` moved to the end, in the order listed in `trailing`.
+// The others keep their relative order: an elimination order restricted to a subgraph fills no
+// more than it did in the whole graph.
+std::vector<int> OrderWithTrailing(const std::vector<int>& order, const std::vector<int>& trailing,
+                                   const std::vector<int>& trailing_index) {
+  std::vector<int> result;
+  result.reserve(order.size());
+  for (int f : order)
+    if (trailing_index[static_cast<std::size_t>(f)] < 0) result.push_back(f);
+  result.insert(result.end(), trailing.begin(), trailing.end());
+  return result;
+}
+
+// (L_TT L_TT^T)^-1 for the trailing m x m block L_TT of a supernodal factor whose last m
+// columns are T: the inverse of the Schur complement of T, which is (K^-1)_TT. Supernode t
+// holds columns super[t] .. super[t+1]-1 as a dense column-major nrows x ncols array at px[t],
+// rows listed at pi[t].
+Eigen::MatrixXd TrailingBlockInverse(const cholmod_factor& f, int m) {
+  HAPCO_ASSERT(f.is_super, "expected a supernodal factor");
+  const int n = static_cast<int>(f.n);
+  const int offset = n - m;
+  Eigen::MatrixXd inverse = Eigen::MatrixXd::Zero(m, m);
+  const auto* super = static_cast<const int*>(f.super);
+  const auto* pi = static_cast<const int*>(f.pi);
+  const auto* px = static_cast<const int*>(f.px);
+  const auto* rows = static_cast<const int*>(f.s);
+  const auto* values = static_cast<const double*>(f.x);
+  for (std::size_t t = 0; t < f.nsuper; ++t) {
+    const int first_col = super[t], end_col = super[t + 1];
+    if (end_col <= offset) continue;
+    const int nrows = pi[t + 1] - pi[t];
+    for (int col = std::max(first_col, offset); col < end_col; ++col) {
+      const double* column = values + px[t] + static_cast<std::ptrdiff_t>(col - first_col) * nrows;
+      for (int r = col - first_col; r < nrows; ++r) {
+        const int row = rows[pi[t] + r];
+        if (row >= offset) inverse(row - offset, col - offset) = column[r];
+      }
+    }
+  }
+  int info = 0;
+  dpotri_("L", &m, inverse.data(), &m, &info);
+  HAPCO_ASSERT(info == 0, "LAPACK dpotri failed on the contact nodes' Schur factor");
+  for (int c = 1; c < m; ++c)
+    for (int r = 0; r < c; ++r) inverse(r, c) = inverse(c, r);
+  return inverse;
+}
+
 }  // namespace
 
 struct ElasticBody::Factor {
   SupernodalLlt llt;
+  // Empty: llt applies CHOLMOD's own fill-reducing order. Otherwise llt factors K_ff permuted
+  // so that position k holds free dof order[k] (natural order inside CHOLMOD), with the
+  // `trailing` free dofs last, in that order; trailing_index[f] = position of f among them or -1.
+  std::vector<int> order;
+  std::vector<int> trailing;
+  std::vector<int> trailing_index;
 };
 
 ElasticBody::~ElasticBody() = default;
@@ -136,7 +213,35 @@ ElasticBody::ElasticBody(Spec spec) : spec_(std::move(spec)) {
     watch.Restart();
     const Eigen::SparseMatrix<double> k_ff = FreeStiffnessLower();
     factor_ = std::make_unique<Factor>();
-    factor_->llt.compute(k_ff);
+    CheckNodes(spec_.compliance_nodes, "compliance");
+    factor_->trailing_index.assign(static_cast<std::size_t>(nf), -1);
+    for (const int n : spec_.compliance_nodes)
+      for (int a = 0; a < 3; ++a) {
+        const int f = dof_to_free_[static_cast<std::size_t>(3 * n + a)];
+        if (f < 0 || factor_->trailing_index[static_cast<std::size_t>(f)] >= 0) continue;
+        factor_->trailing_index[static_cast<std::size_t>(f)] = static_cast<int>(factor_->trailing.size());
+        factor_->trailing.push_back(f);
+      }
+    if (factor_->trailing.empty()) {
+      factor_->llt.compute(k_ff);
+    } else {
+      // One factorization serves both the solves and the compliance block: the candidates'
+      // dofs go last, so the trailing block of L is their Schur complement's factor.
+      factor_->order = OrderWithTrailing(FillReducingOrder(k_ff), factor_->trailing, factor_->trailing_index);
+      Eigen::PermutationMatrix<Eigen::Dynamic, Eigen::Dynamic, int> to_position(nf);
+      for (int k = 0; k < nf; ++k) to_position.indices()[factor_->order[static_cast<std::size_t>(k)]] = k;
+      Eigen::SparseMatrix<double> permuted(nf, nf);
+      permuted.selfadjointView<Eigen::Lower>() = k_ff.selfadjointView<Eigen::Lower>().twistedBy(to_position);
+      cholmod_common& common = factor_->llt.cholmod();
+      common.nmethods = 1;
+      common.method[0].ordering = CHOLMOD_NATURAL;
+      common.postorder = 0;  // a postorder could move the trailing dofs away from the end
+      factor_->llt.compute(permuted);
+      if (factor_->llt.info() == Eigen::Success) {
+        const int* used = static_cast<const int*>(factor_->llt.factor()->Perm);
+        for (int k = 0; k < nf; ++k) HAPCO_ASSERT(used == nullptr || used[k] == k, "CHOLMOD did not keep the given order");
+      }
+    }
     if (factor_->llt.info() != Eigen::Success) {
       throw InputError("stiffness is not positive definite after removing the clamped and "
                        "driven nodes: the Dirichlet nodes must stop every rigid motion (clamp "
@@ -174,9 +279,28 @@ Eigen::SparseMatrix<double> ElasticBody::FreeStiffnessLower() const {
 
 Eigen::MatrixXd ElasticBody::SolveFree(const Eigen::MatrixXd& rhs_free) const {
   HAPCO_ASSERT(factor_ != nullptr, "no free dofs to solve for");
-  Eigen::MatrixXd x = factor_->llt.solve(rhs_free);
+  if (factor_->order.empty()) {
+    Eigen::MatrixXd x = factor_->llt.solve(rhs_free);
+    HAPCO_ASSERT(factor_->llt.info() == Eigen::Success, "CHOLMOD solve failed");
+    return x;
+  }
+  const auto& order = factor_->order;
+  const int nf = num_free_dofs();
+  Eigen::MatrixXd permuted(nf, rhs_free.cols());
+  for (int k = 0; k < nf; ++k) permuted.row(k) = rhs_free.row(order[static_cast<std::size_t>(k)]);
+  const Eigen::MatrixXd y = factor_->llt.solve(permuted);
   HAPCO_ASSERT(factor_->llt.info() == Eigen::Success, "CHOLMOD solve failed");
+  Eigen::MatrixXd x(nf, rhs_free.cols());
+  for (int k = 0; k < nf; ++k) x.row(order[static_cast<std::size_t>(k)]) = y.row(k);
   return x;
+}
+
+std::vector<int> ElasticBody::FreeDofOrder() const {
+  if (!factor_->order.empty()) return factor_->order;
+  const cholmod_factor* f = factor_->llt.factor();
+  HAPCO_ASSERT(f != nullptr && f->Perm != nullptr, "no CHOLMOD factor of K_ff");
+  const int* perm = static_cast<const int*>(f->Perm);
+  return {perm, perm + f->n};
 }
 
 Eigen::VectorXd ElasticBody::SolveDisplacement(const Eigen::VectorXd& nodal_force_n,
@@ -241,23 +365,6 @@ Eigen::MatrixXd ElasticBody::ComplianceBlockBySolves(std::span<const int> nodes)
   return c;
 }
 
-namespace {
-
-// A CHOLMOD workspace that is freed on every path out.
-struct CholmodSession {
-  cholmod_common common{};
-  cholmod_factor* factor = nullptr;
-  CholmodSession() { cholmod_start(&common); }
-  ~CholmodSession() {
-    if (factor != nullptr) cholmod_free_factor(&factor, &common);
-    cholmod_finish(&common);
-  }
-  CholmodSession(const CholmodSession&) = delete;
-  CholmodSession& operator=(const CholmodSession&) = delete;
-};
-
-}  // namespace
-
 void ElasticBody::ComplianceColumns(
     std::span<const int> nodes, const std::function<void(int, const Eigen::Ref<const Eigen::VectorXd>&)>& sink) const {
   CheckNodes(nodes, "compliance");
@@ -281,65 +388,40 @@ void ElasticBody::ComplianceColumns(
   const int m = static_cast<int>(s_to_free.size());
   if (m == 0) return;
 
-  // C_SS = (K_ff^-1)_SS = (K_SS - K_SI K_II^-1 K_IS)^-1: factor K_ff once more with S ordered
-  // last, so the trailing m x m block L_SS of the Cholesky factor is the Schur complement's own
-  // factor (L_SS L_SS^T), and invert that small dense SPD matrix with LAPACK (dpotri). This
-  // costs one sparse factorization plus O(m^3) dense work, instead of m full solves with the
-  // factor (each O(nnz(L))): at ~100k dofs and m ~ 2600 that was two minutes.
-  // The interior keeps the body factor's fill-reducing order (an elimination order restricted
-  // to a subgraph fills no more than it did in the whole graph).
-  const cholmod_factor* body_factor = factor_->llt.factor();
-  HAPCO_ASSERT(body_factor != nullptr && static_cast<int>(body_factor->n) == nf, "no CHOLMOD factor of K_ff");
-  const int* body_perm = static_cast<const int*>(body_factor->Perm);
-  std::vector<int> perm;
-  perm.reserve(static_cast<std::size_t>(nf));
-  for (int k = 0; k < nf; ++k)
-    if (free_to_s[static_cast<std::size_t>(body_perm[k])] < 0) perm.push_back(body_perm[k]);
-  perm.insert(perm.end(), s_to_free.begin(), s_to_free.end());
-
-  const Eigen::SparseMatrix<double> k_ff = FreeStiffnessLower();
-  cholmod_sparse a = Eigen::viewAsCholmod(k_ff.selfadjointView<Eigen::Lower>());
-  CholmodSession cholmod;
-  cholmod.common.nmethods = 1;
-  cholmod.common.method[0].ordering = CHOLMOD_GIVEN;
-  cholmod.common.postorder = 0;  // a postorder could move S away from the end
-  cholmod.common.supernodal = CHOLMOD_SUPERNODAL;
-  cholmod.factor = cholmod_analyze_p(&a, perm.data(), nullptr, 0, &cholmod.common);
-  HAPCO_ASSERT(cholmod.factor != nullptr, "CHOLMOD analysis with S last failed");
-  const int* used_perm = static_cast<const int*>(cholmod.factor->Perm);
-  for (int k = 0; k < nf; ++k) HAPCO_ASSERT(used_perm[k] == perm[static_cast<std::size_t>(k)], "CHOLMOD did not keep the given order");
-  cholmod_factorize(&a, cholmod.factor, &cholmod.common);
-  HAPCO_ASSERT(cholmod.common.status == CHOLMOD_OK && static_cast<int>(cholmod.factor->minor) == nf,
-               "CHOLMOD factorization with S last failed (the body factor succeeded)");
-  HAPCO_ASSERT(cholmod.factor->is_super, "expected a supernodal factor");
-
-  // Copy the trailing block out of the supernodes: supernode t holds columns super[t] ..
-  // super[t+1]-1 as a dense column-major nrows x ncols array at px[t], rows listed at pi[t].
-  const int offset = nf - m;
-  Eigen::MatrixXd inverse = Eigen::MatrixXd::Zero(m, m);
-  const auto* super = static_cast<const int*>(cholmod.factor->super);
-  const auto* pi = static_cast<const int*>(cholmod.factor->pi);
-  const auto* px = static_cast<const int*>(cholmod.factor->px);
-  const auto* rows = static_cast<const int*>(cholmod.factor->s);
-  const auto* values = static_cast<const double*>(cholmod.factor->x);
-  for (std::size_t t = 0; t < cholmod.factor->nsuper; ++t) {
-    const int first_col = super[t], end_col = super[t + 1];
-    if (end_col <= offset) continue;
-    const int nrows = pi[t + 1] - pi[t];
-    for (int col = std::max(first_col, offset); col < end_col; ++col) {
-      const double* column = values + px[t] + static_cast<std::ptrdiff_t>(col - first_col) * nrows;
-      for (int r = col - first_col; r < nrows; ++r) {
-        const int row = rows[pi[t] + r];
-        if (row >= offset) inverse(row - offset, col - offset) = column[r];
-      }
-    }
+  // C_SS = (K_ff^-1)_SS = (K_SS - K_SI K_II^-1 K_IS)^-1: with S ordered last in a Cholesky
+  // factor of K_ff, its trailing m x m block L_SS is the Schur complement's own factor
+  // (L_SS L_SS^T), so C_SS is that small dense SPD matrix inverted (dpotri): O(m^3), instead of
+  // m full solves with the factor (each O(nnz(L))), which at ~100k dofs and m ~ 2600 took two
+  // minutes. The body's factor has its compliance_nodes last; if S is among them, (K^-1)_SS is
+  // a sub-block of their inverse. Otherwise factor K_ff once more with S last.
+  Eigen::MatrixXd inverse;
+  std::vector<int> s_to_inverse(static_cast<std::size_t>(m));
+  const std::vector<int>& trailing_index = factor_->trailing_index;
+  const bool in_body_factor = std::all_of(s_to_free.begin(), s_to_free.end(), [&](int f) {
+    return trailing_index[static_cast<std::size_t>(f)] >= 0;
+  });
+  if (in_body_factor) {
+    inverse = TrailingBlockInverse(*factor_->llt.factor(), static_cast<int>(factor_->trailing.size()));
+    for (int k = 0; k < m; ++k) s_to_inverse[static_cast<std::size_t>(k)] = trailing_index[static_cast<std::size_t>(s_to_free[static_cast<std::size_t>(k)])];
+  } else {
+    std::vector<int> perm = OrderWithTrailing(FreeDofOrder(), s_to_free, free_to_s);
+    const Eigen::SparseMatrix<double> k_ff = FreeStiffnessLower();
+    cholmod_sparse a = Eigen::viewAsCholmod(k_ff.selfadjointView<Eigen::Lower>());
+    CholmodSession cholmod;
+    cholmod.common.nmethods = 1;
+    cholmod.common.method[0].ordering = CHOLMOD_GIVEN;
+    cholmod.common.postorder = 0;  // a postorder could move S away from the end
+    cholmod.common.supernodal = CHOLMOD_SUPERNODAL;
+    cholmod.factor = cholmod_analyze_p(&a, perm.data(), nullptr, 0, &cholmod.common);
+    HAPCO_ASSERT(cholmod.factor != nullptr, "CHOLMOD analysis with S last failed");
+    const int* used_perm = static_cast<const int*>(cholmod.factor->Perm);
+    for (int k = 0; k < nf; ++k) HAPCO_ASSERT(used_perm[k] == perm[static_cast<std::size_t>(k)], "CHOLMOD did not keep the given order");
+    cholmod_factorize(&a, cholmod.factor, &cholmod.common);
+    HAPCO_ASSERT(cholmod.common.status == CHOLMOD_OK && static_cast<int>(cholmod.factor->minor) == nf,
+                 "CHOLMOD factorization with S last failed (the body factor succeeded)");
+    inverse = TrailingBlockInverse(*cholmod.factor, m);
+    for (int k = 0; k < m; ++k) s_to_inverse[static_cast<std::size_t>(k)] = k;
   }
-  cholmod_free_factor(&cholmod.factor, &cholmod.common);
-  int info = 0;
-  dpotri_("L", &m, inverse.data(), &m, &info);
-  HAPCO_ASSERT(info == 0, "LAPACK dpotri failed on the contact nodes' Schur factor");
-  for (int c = 1; c < m; ++c)
-    for (int r = 0; r < c; ++r) inverse(r, c) = inverse(c, r);
 
   Eigen::VectorXd column = Eigen::VectorXd::Zero(3 * s);
   for (int c = 0; c < 3 * s; ++c) {
@@ -347,7 +429,7 @@ void ElasticBody::ComplianceColumns(
     if (sc < 0) continue;
     for (int r = 0; r < 3 * s; ++r) {
       const int sr = block_to_s[static_cast<std::size_t>(r)];
-      column[r] = sr < 0 ? 0.0 : inverse(sr, sc);
+      column[r] = sr < 0 ? 0.0 : inverse(s_to_inverse[static_cast<std::size_t>(sr)], s_to_inverse[static_cast<std::size_t>(sc)]);
     }
     sink(c, column);
   }

@@ -30,10 +30,16 @@ class ElasticBody {
     Material material;
     std::vector<int> clamped_nodes;  // displacement fixed to zero
     std::vector<int> driven_nodes;   // translated rigidly with the device (Dirichlet data)
+    // Nodes whose compliance block will be asked for (a scene's contact candidates). Their
+    // free dofs are ordered last in the body's one factor, so ComplianceBlock on them, or on
+    // any subset, reads their Schur factor off it instead of factoring again. Empty: CHOLMOD
+    // orders all dofs freely (and ComplianceBlock factors a second time).
+    std::vector<int> compliance_nodes;
   };
 
   // Validates the spec (InputError), assembles K, removes all dofs of clamped and driven nodes,
-  // factors K_ff once with CHOLMOD (supernodal LL^T) and computes the unit driven fields.
+  // factors K_ff once with CHOLMOD (supernodal LL^T; compliance_nodes' dofs last, the rest in
+  // CHOLMOD's fill-reducing order) and computes the unit driven fields.
   // Throws InputError if there is no Dirichlet node, the Dirichlet nodes are collinear (a
   // rigid rotation is left free), a node id is out of range, a node is both clamped and
   // driven, or the CHOLMOD factorization finds K_ff not positive definite.
@@ -71,9 +77,10 @@ class ElasticBody {
   // Compliance block of a node set S (3|S| x 3|S|, m/N): C(3i+a, 3j+b) = displacement of node
   // S[i] along axis a for a unit force at node S[j] along axis b, all Dirichlet dofs held at
   // zero. Rows/columns of Dirichlet nodes are zero. Computed as the inverse of the Schur
-  // complement of the free dofs of S (a second CHOLMOD factorization with S ordered last, then
-  // LAPACK dpotri): one factorization plus O(m^3) for m free dofs in S, and a transient dense
-  // m x m array (8 m^2 bytes) besides the body's factor.
+  // complement of the free dofs of S (the trailing block of a Cholesky factor with S ordered
+  // last, inverted with LAPACK dpotri): O(m^3) for m free dofs in S when S is within
+  // Spec::compliance_nodes (the body's factor already has them last), else one more CHOLMOD
+  // factorization first; a transient dense m x m array (8 m^2 bytes) either way.
   Eigen::MatrixXd ComplianceBlock(std::span<const int> nodes) const;
   // The same block by 3|S| batched solves with the body's factor (the method before the Schur
   // complement one): O(|S| nnz(L)). Kept as the baseline of fem_bench and a second, independent
@@ -102,6 +109,8 @@ class ElasticBody {
   Eigen::SparseMatrix<double> FreeStiffnessLower() const;
   // Solves K_ff X = B for free-dof right-hand sides (columns).
   Eigen::MatrixXd SolveFree(const Eigen::MatrixXd& rhs_free) const;
+  // The factor's elimination order: position k eliminates free dof FreeDofOrder()[k].
+  std::vector<int> FreeDofOrder() const;
 
   Spec spec_;
   Eigen::SparseMatrix<double> stiffness_;

@@ -118,52 +118,56 @@ std::string DescribeOverLimit(const fem::Mesh& mesh, const BodyBuildEstimate& es
   return text;
 }
 
-fem::ElasticBody BuildBody(const BodySpec& body) {
+fem::Mesh BodyMesh(const BodySpec& body) {
   if (body.mesh != nullptr) {
     const BodyBuildEstimate estimate = EstimateMeshBuild(body.mesh->mesh);
     if (estimate.bytes > kMaxBodyBuildBytes) {
       throw InputError("body '" + body.name + "' (" + body.mesh->source + "): " + DescribeOverLimit(body.mesh->mesh, estimate));
     }
-    fem::ElasticBody::Spec spec;
-    spec.mesh = body.mesh->mesh;
-    spec.material = body.material;
-    spec.clamped_nodes = body.mesh->clamped_nodes;
-    for (int node : body.mesh->driven_nodes) {
-      if (!std::binary_search(spec.clamped_nodes.begin(), spec.clamped_nodes.end(), node)) spec.driven_nodes.push_back(node);
-    }
-    try {
-      return fem::ElasticBody(std::move(spec));
-    } catch (const InputError& error) {
-      throw InputError("body '" + body.name + "' (" + body.mesh->source + "): " + error.what());
-    }
+    return body.mesh->mesh;
   }
   const BodyBuildEstimate estimate = EstimateBodyBuild(body.box);
   if (estimate.bytes > kMaxBodyBuildBytes) {
     throw InputError("body '" + body.name + "': " + DescribeOverLimit(body.box, estimate));
   }
+  return fem::MakeBoxMesh(body.box);
+}
+
+fem::ElasticBody BuildBody(const BodySpec& body, fem::Mesh mesh, std::vector<int> compliance_nodes) {
   fem::ElasticBody::Spec spec;
-  spec.mesh = fem::MakeBoxMesh(body.box);
+  spec.mesh = std::move(mesh);
   spec.material = body.material;
-  for (fem::BoxFace face : body.clamped_faces) {
-    const std::vector<int> nodes = fem::NodesOnBoxFace(spec.mesh, body.box, face);
-    spec.clamped_nodes.insert(spec.clamped_nodes.end(), nodes.begin(), nodes.end());
-  }
-  std::sort(spec.clamped_nodes.begin(), spec.clamped_nodes.end());
-  spec.clamped_nodes.erase(std::unique(spec.clamped_nodes.begin(), spec.clamped_nodes.end()),
-                           spec.clamped_nodes.end());
-  if (body.driven_face) {
-    for (int node : fem::NodesOnBoxFace(spec.mesh, body.box, *body.driven_face)) {
-      // A node both clamped and driven stays clamped (an edge shared by two such faces).
-      if (!std::binary_search(spec.clamped_nodes.begin(), spec.clamped_nodes.end(), node)) {
-        spec.driven_nodes.push_back(node);
+  spec.compliance_nodes = std::move(compliance_nodes);
+  if (body.mesh != nullptr) {
+    spec.clamped_nodes = body.mesh->clamped_nodes;
+    for (int node : body.mesh->driven_nodes) {
+      if (!std::binary_search(spec.clamped_nodes.begin(), spec.clamped_nodes.end(), node)) spec.driven_nodes.push_back(node);
+    }
+  } else {
+    for (fem::BoxFace face : body.clamped_faces) {
+      const std::vector<int> nodes = fem::NodesOnBoxFace(spec.mesh, body.box, face);
+      spec.clamped_nodes.insert(spec.clamped_nodes.end(), nodes.begin(), nodes.end());
+    }
+    std::sort(spec.clamped_nodes.begin(), spec.clamped_nodes.end());
+    spec.clamped_nodes.erase(std::unique(spec.clamped_nodes.begin(), spec.clamped_nodes.end()),
+                             spec.clamped_nodes.end());
+    if (body.driven_face) {
+      for (int node : fem::NodesOnBoxFace(spec.mesh, body.box, *body.driven_face)) {
+        // A node both clamped and driven stays clamped (an edge shared by two such faces).
+        if (!std::binary_search(spec.clamped_nodes.begin(), spec.clamped_nodes.end(), node)) {
+          spec.driven_nodes.push_back(node);
+        }
       }
     }
   }
   try {
     return fem::ElasticBody(std::move(spec));
   } catch (const InputError& error) {
-    throw InputError("body '" + body.name + "': " + error.what());
+    const std::string where = body.mesh != nullptr ? " (" + body.mesh->source + ")" : "";
+    throw InputError("body '" + body.name + "'" + where + ": " + error.what());
   }
 }
+
+fem::ElasticBody BuildBody(const BodySpec& body) { return BuildBody(body, BodyMesh(body), {}); }
 
 }  // namespace hapco::sim

@@ -95,9 +95,14 @@ inline constexpr long long kMaxTrajectorySteps = 100'000'000;
 // Largest Coulomb coefficient a scene (and hapco-sim --mu) accepts, dimensionless.
 inline constexpr double kMaxFrictionCoefficient = 10.0;
 
-// Meshes the body's box (or takes its imported mesh), gathers its Dirichlet nodes and factors
-// its stiffness (once). Throws InputError, before allocating, when the estimate exceeds
-// kMaxBodyBuildBytes.
+// The body's mesh: its imported mesh, or its box meshed. Throws InputError, before allocating,
+// when the estimated build exceeds kMaxBodyBuildBytes.
+fem::Mesh BodyMesh(const BodySpec& body);
+// Gathers the Dirichlet nodes of `mesh` (BodyMesh(body)) and factors its stiffness once, with
+// the dofs of `compliance_nodes` (the scene's contact candidates) ordered last so their
+// compliance block needs no second factorization (fem::ElasticBody::Spec).
+fem::ElasticBody BuildBody(const BodySpec& body, fem::Mesh mesh, std::vector<int> compliance_nodes);
+// BuildBody(body, BodyMesh(body), {}).
 fem::ElasticBody BuildBody(const BodySpec& body);
 
 }  // namespace hapco::sim

@@ -26,6 +26,20 @@ double SmallestExtent(const fem::Mesh& mesh) {
   return (mesh.nodes_m.colwise().maxCoeff() - mesh.nodes_m.colwise().minCoeff()).minCoeff();
 }
 
+// Corner and midside nodes of the faces, sorted, once each: a surface's contact candidates.
+std::vector<int> FaceNodes(const std::vector<fem::SurfaceTriangle>& faces) {
+  std::vector<int> nodes;
+  for (const fem::SurfaceTriangle& face : faces) {
+    for (int node : face.corners) nodes.push_back(node);
+    for (int node : face.midsides) {
+      if (node >= 0) nodes.push_back(node);
+    }
+  }
+  std::sort(nodes.begin(), nodes.end());
+  nodes.erase(std::unique(nodes.begin(), nodes.end()), nodes.end());
+  return nodes;
+}
+
 // Everything of a ContactSurface except the compliance, from its faces.
 ContactSurface DescribeSurface(const fem::Mesh& mesh, std::vector<fem::SurfaceTriangle> triangles) {
   ContactSurface surface;
@@ -43,13 +57,8 @@ ContactSurface DescribeSurface(const fem::Mesh& mesh, std::vector<fem::SurfaceTr
     surface.triangle_frames.push_back(FrameFromNormal(normals[t]));
     surface.longest_edge_m =
         std::max({surface.longest_edge_m, (p1 - p0).norm(), (p2 - p1).norm(), (p0 - p2).norm()});
-    for (int node : tri.corners) surface.nodes.push_back(node);
-    for (int node : tri.midsides) {
-      if (node >= 0) surface.nodes.push_back(node);
-    }
   }
-  std::sort(surface.nodes.begin(), surface.nodes.end());
-  surface.nodes.erase(std::unique(surface.nodes.begin(), surface.nodes.end()), surface.nodes.end());
+  surface.nodes = FaceNodes(surface.triangles);
   surface.node_index = IndexOf(surface.nodes, mesh.num_nodes());
 
   // Sharp edges: two faces of the surface meeting at more than kFeatureEdgeAngleRad. An edge
@@ -148,21 +157,24 @@ bool OnContactSurface(const BodySpec& body, const fem::SurfaceTriangle& triangle
 
 }  // namespace
 
-TwoBodyModel::TwoBodyModel(SceneSpec scene, std::size_t max_operator_bytes)
-    : scene_(std::move(scene)), obstacle_(BuildBody(scene_.obstacle)), tool_(BuildBody(scene_.tool)) {
-  Stopwatch total;
-  stats_.build_seconds = obstacle_.stats().assembly_seconds + obstacle_.stats().factorization_seconds +
-                         tool_.stats().assembly_seconds + tool_.stats().factorization_seconds;
-  if (!(std::isfinite(scene_.reach_m) && scene_.reach_m > 0.0)) {
-    throw InputError("scene reach_m must be a finite distance > 0 m, got " + std::to_string(scene_.reach_m));
+struct TwoBodyModel::Parts {
+  SceneSpec scene;
+  std::vector<fem::SurfaceTriangle> obstacle_faces, tool_faces;
+  fem::ElasticBody obstacle, tool;
+};
+
+TwoBodyModel::Parts TwoBodyModel::MakeParts(SceneSpec scene) {
+  if (!(std::isfinite(scene.reach_m) && scene.reach_m > 0.0)) {
+    throw InputError("scene reach_m must be a finite distance > 0 m, got " + std::to_string(scene.reach_m));
   }
-  const fem::Mesh& obstacle_mesh = obstacle_.mesh();
-  const fem::Mesh& tool_mesh = tool_.mesh();
-  obstacle_thickness_m_ = SmallestExtent(obstacle_mesh);
-  tool_thickness_m_ = SmallestExtent(tool_mesh);
+  // The candidate faces need only the meshes; finding them before the bodies are factored lets
+  // each factor order its candidates' dofs last (one factorization gives both the solves and
+  // the compliance block, algorithms.md section 6).
+  fem::Mesh obstacle_mesh = BodyMesh(scene.obstacle);
+  fem::Mesh tool_mesh = BodyMesh(scene.tool);
 
   // The obstacle faces the tool can reach: the tool's home box grown by the device workspace.
-  const double margin_m = scene_.reach_m + scene_.activation_gap_m;
+  const double margin_m = scene.reach_m + scene.activation_gap_m;
   const Eigen::Vector3d reach_min = tool_mesh.nodes_m.colwise().minCoeff().transpose().array() - margin_m;
   const Eigen::Vector3d reach_max = tool_mesh.nodes_m.colwise().maxCoeff().transpose().array() + margin_m;
   std::vector<fem::SurfaceTriangle> reachable;
@@ -173,25 +185,44 @@ TwoBodyModel::TwoBodyModel(SceneSpec scene, std::size_t max_operator_bytes)
       hi = hi.cwiseMax(Position(obstacle_mesh, corner));
     }
     if ((hi.array() >= reach_min.array()).all() && (lo.array() <= reach_max.array()).all() &&
-        OnContactSurface(scene_.obstacle, triangle)) {
+        OnContactSurface(scene.obstacle, triangle)) {
       reachable.push_back(triangle);
     }
   }
   if (reachable.empty()) {
     std::ostringstream message;
-    message << "no obstacle face is within reach_m = " << scene_.reach_m
+    message << "no obstacle face is within reach_m = " << scene.reach_m
             << " m of the tool: move the bodies closer or raise contact.reach_m";
     throw InputError(message.str());
   }
-  obstacle_surface_ = DescribeSurface(obstacle_mesh, std::move(reachable));
   std::vector<fem::SurfaceTriangle> tool_faces;
   for (const fem::SurfaceTriangle& triangle : fem::BoundaryTriangles(tool_mesh)) {
-    if (OnContactSurface(scene_.tool, triangle)) tool_faces.push_back(triangle);
+    if (OnContactSurface(scene.tool, triangle)) tool_faces.push_back(triangle);
   }
   if (tool_faces.empty()) {
     throw InputError("the tool's contact groups hold no boundary face of the tool: name a surface group of its boundary");
   }
-  tool_surface_ = DescribeSurface(tool_mesh, std::move(tool_faces));
+  std::vector<int> obstacle_candidates = FaceNodes(reachable);
+  std::vector<int> tool_candidates = FaceNodes(tool_faces);
+  fem::ElasticBody obstacle = BuildBody(scene.obstacle, std::move(obstacle_mesh), std::move(obstacle_candidates));
+  fem::ElasticBody tool = BuildBody(scene.tool, std::move(tool_mesh), std::move(tool_candidates));
+  return Parts{std::move(scene), std::move(reachable), std::move(tool_faces), std::move(obstacle), std::move(tool)};
+}
+
+TwoBodyModel::TwoBodyModel(SceneSpec scene, std::size_t max_operator_bytes)
+    : TwoBodyModel(MakeParts(std::move(scene)), max_operator_bytes) {}
+
+TwoBodyModel::TwoBodyModel(Parts parts, std::size_t max_operator_bytes)
+    : scene_(std::move(parts.scene)), obstacle_(std::move(parts.obstacle)), tool_(std::move(parts.tool)) {
+  Stopwatch total;
+  stats_.build_seconds = obstacle_.stats().assembly_seconds + obstacle_.stats().factorization_seconds +
+                         tool_.stats().assembly_seconds + tool_.stats().factorization_seconds;
+  const fem::Mesh& obstacle_mesh = obstacle_.mesh();
+  const fem::Mesh& tool_mesh = tool_.mesh();
+  obstacle_thickness_m_ = SmallestExtent(obstacle_mesh);
+  tool_thickness_m_ = SmallestExtent(tool_mesh);
+  obstacle_surface_ = DescribeSurface(obstacle_mesh, std::move(parts.obstacle_faces));
+  tool_surface_ = DescribeSurface(tool_mesh, std::move(parts.tool_faces));
   for (std::size_t i = 0; i < obstacle_surface_.nodes.size(); ++i) {
     if (obstacle_surface_.on_sharp_edge[i]) {
       obstacle_edge_nodes_.push_back(obstacle_surface_.nodes[i]);

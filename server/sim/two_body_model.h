@@ -123,6 +123,10 @@ class TwoBodyModel {
   const TwoBodyModelStats& stats() const { return stats_; }
 
  private:
+  struct Parts;  // the scene, its bodies and their candidate faces, made before the members
+  static Parts MakeParts(SceneSpec scene);
+  TwoBodyModel(Parts parts, std::size_t max_operator_bytes);
+
   SceneSpec scene_;
   fem::ElasticBody obstacle_;
   fem::ElasticBody tool_;
