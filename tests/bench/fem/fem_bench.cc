@@ -1,6 +1,7 @@
 // fem_bench: cost of the FEM pipeline on the red bar (0.10 x 0.02 x 0.02 m) meshed at about 1k,
 // 10k and 50k dofs with Tet4 and Tet10, and of the compliance block that benchmark 1 needs
-// (algorithms.md section 6). Times are medians of repeated runs; memory is resident-set growth.
+// (algorithms.md section 6) at about 10k, 50k and 100k dofs, against the batched-solve baseline.
+// Times are medians of repeated runs; memory is resident-set growth.
 #include <algorithm>
 #include <cstdio>
 #include <string>
@@ -67,37 +68,70 @@ void BenchBody(ElementOrder order, int nx, int nyz) {
   std::fflush(stdout);
 }
 
-void BenchComplianceBlock() {
-  // Benchmark 1's obstacle: the red bar clamped at x = 0 and x = L, Tet10 20x4x4; candidate
-  // contact nodes = every node of its top face.
-  const BoxMeshSpec spec = RedBar(ElementOrder::kTet10, 20, 4);
+// Compliance block of the red bar clamped at x = 0 and x = L, candidate contact nodes = every node
+// of its top face (benchmark 1's obstacle at 20x4x4). Times both the Schur-complement method the
+// server uses (ComplianceBlock) and the batched-solve baseline (ComplianceBlockBySolves, the method
+// before it) when `with_baseline`, and checks that they agree.
+void BenchComplianceBlock(int nx, int nyz, bool with_baseline) {
+  const BoxMeshSpec spec = RedBar(ElementOrder::kTet10, nx, nyz);
   ElasticBody::Spec s;
   s.mesh = MakeBoxMesh(spec);
   s.material = {3e6, 0.3};
   s.clamped_nodes = NodesOnBoxFace(s.mesh, spec, BoxFace::kXMin);
   const auto far_end = NodesOnBoxFace(s.mesh, spec, BoxFace::kXMax);
   s.clamped_nodes.insert(s.clamped_nodes.end(), far_end.begin(), far_end.end());
+  const std::size_t peak_before = hapco::PeakResidentBytes();
   hapco::Stopwatch build;
   const ElasticBody body(std::move(s));
   const double build_s = build.ElapsedSeconds();
   const std::vector<int> top = NodesOnBoxFace(body.mesh(), spec, BoxFace::kZMax);
+  const int repeats = body.num_dofs() < 20000 ? 3 : 1;
   std::vector<double> times;
   Eigen::MatrixXd c;
-  for (int i = 0; i < 3; ++i) {
+  for (int i = 0; i < repeats; ++i) {
     hapco::Stopwatch watch;
     c = body.ComplianceBlock(top);
     times.push_back(watch.ElapsedSeconds());
   }
-  int free_nodes = 0;
-  for (int n : top) free_nodes += body.is_dirichlet_node(n) ? 0 : 1;
-  std::printf("\nComplianceBlock, benchmark 1 obstacle (Tet10 20x4x4, clamped at x=0 and x=L, %d dofs):\n",
-              body.num_dofs());
-  std::printf("  candidate nodes (top face) %zu (%d free) -> block %ld x %ld, %.1f MiB\n", top.size(),
-              free_nodes, static_cast<long>(c.rows()), static_cast<long>(c.cols()),
-              static_cast<double>(c.size()) * 8.0 / kMiB);
-  std::printf("  body construction (assembly + factor + 3 unit solves) %.3f s\n", build_s);
-  std::printf("  ComplianceBlock median of 3: %.3f s (%.3f ms per free column)\n", Median(times),
-              1e3 * Median(times) / (3.0 * free_nodes));
+  const std::size_t peak_after = hapco::PeakResidentBytes();
+  // The server's way: the candidates are known when the body is built, so its one factor
+  // orders them last and the block is read off it (Spec::compliance_nodes).
+  ElasticBody::Spec ordered_spec;
+  ordered_spec.mesh = body.mesh();
+  ordered_spec.material = body.material();
+  ordered_spec.clamped_nodes = body.clamped_nodes();
+  ordered_spec.compliance_nodes = top;
+  hapco::Stopwatch ordered_watch;
+  const ElasticBody ordered(std::move(ordered_spec));
+  const double ordered_build_s = ordered_watch.ElapsedSeconds();
+  const Eigen::MatrixXd c_ordered = ordered.ComplianceBlock(top);
+  const double ordered_total_s = ordered_watch.ElapsedSeconds();
+  const double ordered_diff = (c_ordered - c).cwiseAbs().maxCoeff() / c.cwiseAbs().maxCoeff();
+  double baseline_s = 0.0;
+  double rel_diff = 0.0;
+  if (with_baseline) {
+    std::vector<double> base_times;
+    Eigen::MatrixXd b;
+    for (int i = 0; i < repeats; ++i) {
+      hapco::Stopwatch watch;
+      b = body.ComplianceBlockBySolves(top);
+      base_times.push_back(watch.ElapsedSeconds());
+    }
+    baseline_s = Median(base_times);
+    rel_diff = (c - b).cwiseAbs().maxCoeff() / b.cwiseAbs().maxCoeff();
+  }
+  const std::string div =
+      std::to_string(nx) + "x" + std::to_string(nyz) + "x" + std::to_string(nyz);
+  std::printf("%-9s %8d %6zu %7ld %8.3f %9.3f %9.1f %9.3f %9.3f %9.1e", div.c_str(), body.num_dofs(), top.size(),
+              static_cast<long>(c.rows()), build_s, Median(times),
+              static_cast<double>(peak_after - std::min(peak_after, peak_before)) / kMiB, ordered_build_s,
+              ordered_total_s, ordered_diff);
+  if (with_baseline) {
+    std::printf(" %10.3f %7.1f %9.1e\n", baseline_s, baseline_s / Median(times), rel_diff);
+  } else {
+    std::printf(" %10s %7s %9s\n", "-", "-", "-");
+  }
+  std::fflush(stdout);
 }
 
 // Runs one case in a child process so that its peak RSS is its own, not the largest case's so far.
@@ -134,6 +168,17 @@ int main() {
   InChild([] { BenchBody(ElementOrder::kTet10, 20, 4); });
   InChild([] { BenchBody(ElementOrder::kTet4, 70, 14); });
   InChild([] { BenchBody(ElementOrder::kTet10, 35, 7); });
-  InChild([] { BenchComplianceBlock(); });
+  std::printf("\nCompliance block (algorithms.md section 6): red bar Tet10 clamped at x=0 and x=L,\n"
+              "candidates = top-face nodes; build = assembly + factor + 3 unit solves; schur =\n"
+              "ComplianceBlock (median of 3 below 20k dofs, else 1 run); dPeak = peak-RSS growth over\n"
+              "build + block (a second factorization, the candidates last); one_build_s / one_total_s =\n"
+              "building with the candidates ordered last in the body's one factor, then + the block read\n"
+              "off it (as the server does), one_diff its max difference / max |schur|; solves =\n"
+              "ComplianceBlockBySolves baseline; rel_diff = max |schur - solves| / max |solves|\n");
+  std::printf("%-9s %8s %6s %7s %8s %9s %9s %9s %9s %9s %10s %7s %9s\n", "divisions", "dofs", "cand", "block",
+              "build_s", "schur_s", "dPeak_MiB", "one_build", "one_total", "one_diff", "solves_s", "ratio", "rel_diff");
+  InChild([] { BenchComplianceBlock(20, 4, true); });   // benchmark 1's obstacle, ~10k dofs
+  InChild([] { BenchComplianceBlock(35, 7, true); });   // ~50k dofs
+  InChild([] { BenchComplianceBlock(45, 9, false); });  // ~100k dofs; the baseline takes minutes
   return 0;
 }
