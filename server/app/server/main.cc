@@ -152,8 +152,22 @@ int Run(const Options& options) {
   std::vector<const hapco::sim::TwoBodyModel*> served;
   std::string scenes_line;
   for (const std::string& path : options.scene_paths) {
+    // A mesh scene at ~100k dofs takes seconds to prepare: say what the server is doing.
+    if (options.server.log) {
+      std::printf("hapco-server: preparing scene %s (meshing, factorization, contact compliance)\n", path.c_str());
+      std::fflush(stdout);
+    }
+    hapco::Stopwatch scene_watch;
     models.push_back(std::make_unique<hapco::sim::TwoBodyModel>(hapco::io::LoadSceneFile(path)));
     served.push_back(models.back().get());
+    if (options.server.log) {
+      const hapco::sim::TwoBodyModelStats& stats = models.back()->stats();
+      std::printf("hapco-server: scene %s prepared in %.2f s (bodies' assembly + factorization %.2f s, compliance "
+                  "blocks %.2f s)\n",
+                  models.back()->scene().name.c_str(), scene_watch.ElapsedSeconds(), stats.build_seconds,
+                  stats.compliance_seconds);
+      std::fflush(stdout);
+    }
     if (const std::string note = hapco::sim::StartingPositionNote(*models.back()); !note.empty()) {
       std::printf("hapco-server: scene %s: note: %s\n", models.back()->scene().name.c_str(), note.c_str());
     }
