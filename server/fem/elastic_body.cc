@@ -27,8 +27,8 @@ extern "C" void dpotri_(const char* uplo, const int* n, double* a, const int* ld
 
 namespace {
 
-// Eigen's wrapper, with read access to the CHOLMOD factor it holds (for its fill-reducing
-// permutation, reused by the compliance block below).
+// Eigen's wrapper, with read access to the CHOLMOD factor it holds (its permutation and its
+// trailing supernodes, read by the compliance block below).
 class SupernodalLlt : public Eigen::CholmodSupernodalLLT<Eigen::SparseMatrix<double>, Eigen::Lower> {
  public:
   const cholmod_factor* factor() const { return m_cholmodFactor; }
@@ -58,7 +58,7 @@ std::vector<int> FillReducingOrder(const Eigen::SparseMatrix<double>& k_ff_lower
   return {perm, perm + a.nrow};
 }
 
-// `order` with the dofs flagged in `last` moved to the end, in the order listed in `trailing`.
+// `order` with the dofs listed in `trailing` (trailing_index[f] >= 0) moved to the end, in that list's order.
 // The others keep their relative order: an elimination order restricted to a subgraph fills no
 // more than it did in the whole graph.
 std::vector<int> OrderWithTrailing(const std::vector<int>& order, const std::vector<int>& trailing,
