@@ -35,28 +35,25 @@ Eigen::Matrix3d WeightedBlockSum(const Eigen::MatrixXd& compliance, const std::v
   return total;
 }
 
-// The same sum on a blocked C (BlockedCompliance; slots are its nodes). C = Cᵀ, so each node
-// pair's block is read from one place, column min(p, q) at row max(p, q) — the blocks the
-// broad phase's U = C f has just read for the loaded nodes (ObstacleDisplacementOnRegion), so
-// the gather mostly hits the cache. Plain loops over a block's 9 contiguous doubles (Eigen
-// does not vectorise 3x3 fixed-size products).
+// The same sum on a blocked C (BlockedCompliance; slots are its nodes), reading each block
+// C(p, q) where it is stored (column q), so the 9 sums stay in registers. (Reading the lower
+// triangle only, C(max, min), and transposing half of the blocks was 1.4x slower: the
+// transposed half needed a second set of sums.) Plain loops over a block's 9 contiguous
+// doubles (Eigen does not vectorise 3x3 fixed-size products).
 Eigen::Matrix3d WeightedBlockSum(const BlockedCompliance& compliance, const std::array<int, 6>& p,
                                  const std::array<double, 6>& c, int np, const std::array<int, 6>& q,
                                  const std::array<double, 6>& d, int nq) {
-  double as_stored[9] = {}, transposed[9] = {};  // Σ of blocks C(p, q) and of blocks C(q, p)
+  double sum[9] = {};  // Σ_kl c_k d_l C(p_k, q_l), column-major
   for (int k = 0; k < np; ++k) {
     const int pk = p[static_cast<std::size_t>(k)];
     const double ck = c[static_cast<std::size_t>(k)];
     for (int l = 0; l < nq; ++l) {
-      const int ql = q[static_cast<std::size_t>(l)];
       const double w = ck * d[static_cast<std::size_t>(l)];
-      // Block (row, column) = C(max, min): C(p, q) itself when p > q, else C(q, p) = C(p, q)ᵀ.
-      double* sum = pk > ql ? as_stored : transposed;
-      const double* b = compliance.column_data(std::min(pk, ql)) + 9 * static_cast<std::size_t>(std::max(pk, ql));
-      for (int e = 0; e < 9; ++e) sum[e] += w * b[e];
+      const double* block = compliance.column_data(q[static_cast<std::size_t>(l)]) + 9 * static_cast<std::size_t>(pk);
+      for (int e = 0; e < 9; ++e) sum[e] += w * block[e];
     }
   }
-  return Eigen::Map<const Eigen::Matrix3d>(as_stored) + Eigen::Map<const Eigen::Matrix3d>(transposed).transpose();
+  return Eigen::Map<const Eigen::Matrix3d>(sum);
 }
 
 }  // namespace
