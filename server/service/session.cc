@@ -1,6 +1,7 @@
 #include "service/session.h"
 
 #include <algorithm>
+#include <cmath>
 #include <cstring>
 #include <ctime>
 
@@ -159,6 +160,11 @@ void Session::FillLocalModel(bool force_is_from_this_step) {
   // outside the model's surface (client/phantom/force_renderer.h).
   m.position_m = ToIdl(sim_.last_output().device_translation_m);
   const sim::LocalContactModel& local = local_model_builder_.Linearize(sim_);
+  if (local.surface_ahead && local.surface_normal.allFinite() && std::isfinite(local.surface_gap_m)) {
+    m.surface_ahead = true;
+    m.surface_gap_m = local.surface_gap_m;
+    m.surface_normal = ToIdl(local.surface_normal);
+  }
   // A model needs a contact pushing (its normal) and finite numbers; otherwise none is sent
   // and a client renders the force as it came.
   if (local.normal_device.isZero() || !local.stiffness_n_per_m.allFinite() || !local.device_force_n.allFinite()) {

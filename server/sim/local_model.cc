@@ -1,12 +1,52 @@
 #include "sim/local_model.h"
 
+#include <cmath>
 #include <vector>
+
+#include "common/error.h"
 
 #include "contact/projection.h"
 
 namespace hapco::sim {
 
+LocalModelBuilder::LocalModelBuilder(double surface_reach_m) : surface_reach_m_(surface_reach_m) {
+  HAPCO_ASSERT(std::isfinite(surface_reach_m) && surface_reach_m >= 0.0, "surface reach must be finite and >= 0");
+}
+
 const LocalContactModel& LocalModelBuilder::Linearize(const TwoBodySession& session) {
+  LinearizeContacts(session);
+  LocalContactModel& model = model_;
+  if (model.normal_device.isZero() && surface_reach_m_ > 0.0 && session.last_output().step > 0) {
+    // No contact pushes: nothing is loaded, so the configuration is the probe's
+    // (surface_ahead.h).
+    if (probe_model_ != &session.model()) {
+      surface_probe_.emplace(session.model(), surface_reach_m_);
+      probe_model_ = &session.model();
+      steps_since_surface_search_ = -1;
+    }
+    const Eigen::Vector3d& d = model.device_translation_m;
+    const bool reuse = steps_since_surface_search_ >= 0 && steps_since_surface_search_ < kSurfaceResearchSteps &&
+                       (d - last_surface_pose_m_).norm() <= kSurfaceResearchDistanceM;
+    if (reuse) {
+      ++steps_since_surface_search_;
+    } else {
+      last_surface_ = surface_probe_->Probe(d);
+      last_surface_pose_m_ = d;
+      steps_since_surface_search_ = 0;
+    }
+    if (last_surface_.found) {
+      const double gap_m = last_surface_.gap_m + last_surface_.normal_device.dot(d - last_surface_pose_m_);
+      model.surface_ahead = gap_m >= 0.0;  // (a pose through it is answered by the next search)
+      model.surface_gap_m = std::max(0.0, gap_m);
+      model.surface_normal = last_surface_.normal_device;
+    }
+  } else {
+    steps_since_surface_search_ = -1;  // a contact loads the bodies: search afresh after it
+  }
+  return model;
+}
+
+void LocalModelBuilder::LinearizeContacts(const TwoBodySession& session) {
   LocalContactModel& model = model_;
   model = LocalContactModel{};
   const StepOutput& out = session.last_output();
@@ -17,7 +57,7 @@ const LocalContactModel& LocalModelBuilder::Linearize(const TwoBodySession& sess
   const contact::ContactProblem& problem = session.last_problem();
   const contact::SolverResult& result = session.last_result();
   const int m = static_cast<int>(contacts.size());
-  if (m == 0 || result.force_n.size() < 3 * m) return model;
+  if (m == 0 || result.force_n.size() < 3 * m) return;
   const double gain = session.model().scene().force_gain;
 
   // Active set: the equations E and the basis B of the unknowns (local frame per contact).
@@ -46,7 +86,7 @@ const LocalContactModel& LocalModelBuilder::Linearize(const TwoBodySession& sess
   }
   const double normal_norm = (gain * normal_force_n).norm();
   if (normal_norm > 0.0) model.normal_device = gain * normal_force_n / normal_norm;
-  if (unknowns_.empty()) return model;
+  if (unknowns_.empty()) return;
 
   // G = dq/dd (3m x 3), world axes: contact α's relative displacement moves with its tool
   // nodes' unit fields.
@@ -89,7 +129,6 @@ const LocalContactModel& LocalModelBuilder::Linearize(const TwoBodySession& sess
     const Eigen::RowVector3d dz_j = dz_.row(j);  // fixed size: no temporary on the heap
     model.stiffness_n_per_m.noalias() += (gain * weight) * (c.frame.transpose() * u.direction) * dz_j;
   }
-  return model;
 }
 
 LocalContactModel LinearizeLastStep(const TwoBodySession& session) {

@@ -24,9 +24,11 @@
 // further press: it is not yet good enough there (issue 12).
 #include <Eigen/Dense>
 
+#include <optional>
 #include <vector>
 
 #include "sim/step_pipeline.h"
+#include "sim/surface_ahead.h"
 
 namespace hapco::sim {
 
@@ -45,6 +47,13 @@ struct LocalContactModel {
   Eigen::Vector3d normal_device = Eigen::Vector3d::Zero();
   double friction_coefficient = 0.0;
   int sticking = 0, sliding = 0;  // contacts in the active set
+  // Without any contact at d_k: the obstacle surface ahead of the tool within the builder's
+  // reach (surface_ahead.h), so a client renders the first contact when the device gets there
+  // instead of a round trip later. Near d_k the gap is surface_gap_m + surface_normal·(d − d_k);
+  // a contact there pushes the device along surface_normal (unit).
+  bool surface_ahead = false;
+  double surface_gap_m = 0.0;
+  Eigen::Vector3d surface_normal = Eigen::Vector3d::Zero();
 
   // F(d) ≈ F(d_k) + K (d - d_k), N.
   Eigen::Vector3d ForceAt(const Eigen::Vector3d& pose_m) const {
@@ -57,15 +66,34 @@ struct LocalContactModel {
 // server's 1 kHz path). Cost: the active set's n x n LU (n <= 3 x contacts): docs/network-haptics.md.
 class LocalModelBuilder {
  public:
+  // Without contact, look for the surface ahead within surface_reach_m (m; 0: never).
+  static constexpr double kDefaultSurfaceReachM = 0.01;
+  // The search for the surface ahead costs 50-150 us on the benchmarks (sim_pipeline_bench),
+  // tens of contact-free steps' worth. Apart, the geometry only translates (nothing is
+  // loaded), so a result found at pose d_p holds at d as gap_p + n·(d − d_p) while the nearest
+  // pair stays the same: the search runs again once the device has moved this far since the
+  // last one, or after this many steps (the client extrapolates the same way).
+  static constexpr double kSurfaceResearchDistanceM = 0.0005;
+  static constexpr int kSurfaceResearchSteps = 20;
+  explicit LocalModelBuilder(double surface_reach_m = kDefaultSurfaceReachM);
+
   const LocalContactModel& Linearize(const TwoBodySession& session);
   const LocalContactModel& model() const { return model_; }
 
  private:
+  void LinearizeContacts(const TwoBodySession& session);
+
   struct Unknown {
     int contact = 0;
     Eigen::Vector3d direction = Eigen::Vector3d::Zero();  // r_α = z * direction (local frame)
   };
   LocalContactModel model_;
+  double surface_reach_m_;
+  std::optional<SurfaceAheadProbe> surface_probe_;  // built for the first session's model
+  const TwoBodyModel* probe_model_ = nullptr;
+  SurfaceAhead last_surface_;                                     // of the last search
+  Eigen::Vector3d last_surface_pose_m_ = Eigen::Vector3d::Zero();  // where it ran, m
+  int steps_since_surface_search_ = -1;                            // -1: none to reuse
   std::vector<Unknown> unknowns_;
   std::vector<int> rows_;  // rows of u = W r + q held at zero
   Eigen::MatrixXd g_, w_basis_, system_, rhs_, dz_, dr_;
