@@ -3,23 +3,46 @@
 // docs/network-haptics.md), before the safety filter (phantom.h) applies the device's limits:
 //
 //   direct       the newest force, held until the next one (as the paper's client does);
-//   local-model  the newest local contact model (FeedbackForce.model, sim/local_model.h)
-//                evaluated at the device's *current* position every tick: F0 + K (x - x0), so
-//                the stiffness the hand feels is the contact's, not a stale force's (model-
-//                mediated teleoperation: Mitra & Niemeyer 2008; Schuwerk et al., WHC 2015);
+//   local-model  the newest local model evaluated at the device's *current* position every
+//                tick (model-mediated teleoperation: Mitra & Niemeyer 2008; Schuwerk et al.,
+//                WHC 2015): in contact, the contact model F0 + K (x - x0); apart, the surface
+//                ahead (the nearest obstacle face as a plane, sim/surface_ahead.h), so the
+//                first contact is felt where the device meets it, not a round trip later;
 //   + passivity  either of them, then the time-domain passivity controller (passivity.h) on
 //                what the safety filter lets through: damping exactly when the energy the
 //                device has received goes negative (a delay generating energy).
 //
-// The model is used within bounds the network cannot break: its stiffness is scaled down to
-// what the device can render stably (max_stiffness_n_per_m), it is evaluated at most
-// max_extrapolation_m from the pose it answered, it never pulls (contacts only push: no force
-// against its normal) and its part across the normal stays in the Coulomb cone of the scene's
-// friction coefficient. A new model takes over from the previous one over blend_ticks ticks,
-// so switching models never makes the force jump. An answer "no contact" at a pose where the
-// model gives no force either keeps the model: it still holds the surface where the device
-// will meet it again (the server's answer for that pose is a round trip away); an answer that
-// contradicts the model (no contact where it pushes) drops it.
+// A contact model is rendered as a plane with friction on the device, not as the linear model
+// itself (an intermediate representation: Mark et al., SIGGRAPH 1996; the friction cone of
+// Salisbury et al. 1995):
+//   normal  F_n = s (F0·n − k (x − x0)·n) along the model's normal n, k = −nᵀKn its normal
+//           stiffness, s = min(1, cap / k): a contact stiffer than the device can render
+//           (max_stiffness_n_per_m) is the same wall made softer, at the same place;
+//   across  a Coulomb anchor on the device: a spring of the contact's tangential stiffness
+//           (capped) that slips at μ F_n; the model's tangential force only places the anchor
+//           when a contact begins.
+// Why, measured (docs/network-haptics.md, network_haptics_study): with the linear model
+// F0 + K (x − x0), every part of the force that is not a fixed function of x acts on the
+// delayed pose x0. Capping K alone (the first version) left (1 − s) K acting one round trip
+// late, and K's stiffest direction was a sticking contact's tangential one (7.6 kN/m along a
+// bar clamped at both ends, 1.7 kN/m into it), so the wall itself was rendered at 40 % with the
+// rest delayed: the device rang at 100 and 200 ms. The model's tangential force and its
+// cross terms (normal force against lateral motion: friction and the slope of the deformed
+// obstacle) are state the server carries along the path, and extrapolated over the few mm a
+// device moves in a round trip they drove a 25 Hz wobble during slides at 200 ms. A plane and
+// a local friction law are fixed functions of x and of the device's own history: passive.
+// A surface ahead is rendered with the stiffness of the last contact model (capped), or the cap
+// before any contact.
+//
+// Other bounds the network cannot break: a model is evaluated at most max_extrapolation_m
+// (contact) or max_surface_extrapolation_m (surface ahead) from the pose it answered; it never
+// pulls (contacts only push: no force against its normal); its part across the normal stays in
+// the Coulomb cone of the scene's friction coefficient. A new model takes over from the
+// previous one over blend_ticks ticks, so switching models never makes the force jump. An
+// answer without a contact model at a pose where the model in use gives no force either keeps
+// a contact model (it knows the contact's stiffness; the server's answer for where the device
+// is now is a round trip away); an answer that contradicts it (no contact where it pushes)
+// replaces it.
 #include <Eigen/Dense>
 
 #include <cmath>
@@ -32,6 +55,7 @@
 namespace hapco::phantom {
 
 enum class RenderMode { kDirect, kLocalModel };
+enum class ContactRendering { kPlane, kLinear };
 
 // "direct", "local-model"; false for anything else.
 bool ParseRenderMode(std::string_view name, RenderMode* mode);
@@ -44,6 +68,11 @@ struct ReceivedModel {
   Eigen::Matrix3d stiffness_n_per_m = Eigen::Matrix3d::Zero();  // dF/dx, N/m
   Eigen::Vector3d normal = Eigen::Vector3d::Zero();             // unit, resultant normal force
   double friction_coefficient = 0.0;
+  // Without contact (valid false): the surface ahead, gap(x) = surface_gap_m +
+  // surface_normal·(x - position_m), m; a contact there pushes along surface_normal (unit).
+  bool surface_ahead = false;
+  double surface_gap_m = 0.0;
+  Eigen::Vector3d surface_normal = Eigen::Vector3d::Zero();
 };
 
 struct RendererParameters {
@@ -54,6 +83,15 @@ struct RendererParameters {
   // mass and the hand's damping (phantom.h) the 1 kHz loop stays passive well above it.
   double max_stiffness_n_per_m = 3000.0;
   double max_extrapolation_m = 0.005;  // |x - x0| beyond this is not extrapolated further, m
+  // A surface ahead is used up to this far from the pose it answered, m (the server looks
+  // 10 mm ahead: sim::LocalModelBuilder::kDefaultSurfaceReachM).
+  double max_surface_extrapolation_m = 0.010;
+  // Render the surface ahead (false: nothing until the first contact model arrives).
+  bool surface_ahead = true;
+  // How a contact model is rendered: kPlane (above), or kLinear, the first version (F0 +
+  // K (x - x0) with K capped by its stiffest direction and the model's own tangential force;
+  // kept to measure the difference: a residual delayed spring, docs/network-haptics.md).
+  ContactRendering contact_rendering = ContactRendering::kPlane;
   int blend_ticks = 5;                 // a new model replaces the old one over this many ticks
   double max_damping_n_s_per_m = 100.0;  // the passivity controller's cap, N s/m (passivity.h)
 };
@@ -71,6 +109,8 @@ struct RendererStats {
   uint64_t models_received = 0;      // valid models taken
   uint64_t models_kept = 0;          // answers without contact that the model agreed with (kept)
   uint64_t stiffness_capped = 0;     // models whose stiffness was scaled down
+  uint64_t surfaces_received = 0;    // surfaces ahead taken
+  uint64_t surface_ticks = 0;        // ticks rendered from a surface ahead
   uint64_t extrapolation_capped = 0; // ticks evaluated at the max_extrapolation_m bound
   uint64_t pull_prevented = 0;       // ticks where the model would have pulled: zero force
   uint64_t cone_limited = 0;         // ticks where the tangential part was cut to the cone
@@ -108,11 +148,25 @@ class ForceRenderer {
   const PassivityController& passivity() const { return passivity_; }
 
  private:
+  enum class ModelKind { kNone, kContact, kSurface };
   struct ActiveModel {
-    bool valid = false;
-    Eigen::Vector3d force_n = Eigen::Vector3d::Zero();
+    ModelKind kind = ModelKind::kNone;
+    bool valid() const { return kind != ModelKind::kNone; }
+    Eigen::Vector3d force_n = Eigen::Vector3d::Zero();  // as received (kNone: rendered as is)
     ReceivedModel model;
+    double scale = 1.0;                     // s above (kContact, kPlane)
+    double normal_stiffness_n_per_m = 0.0;  // k above, unscaled (kContact, kPlane)
+    double surface_stiffness_n_per_m = 0;  // kSurface
   };
+  // The received answer as a model to render (kind kNone when it carries none).
+  ActiveModel Take(const Eigen::Vector3d& force_n, const ReceivedModel& model);
+  // The friction limit μ of a contact model: the scene's, or the server's own ratio at x0.
+  static double FrictionLimit(const ActiveModel& active);
+  // The local friction's force at position_m for the normal force of this tick's command
+  // (slips the anchor when beyond the cone), and through the same anchor at the last tick's
+  // position (*at_last_position_n, for motion_change_n).
+  Eigen::Vector3d LocalFriction(const Eigen::Vector3d& normal_force_n, const Eigen::Vector3d& position_m,
+                                Eigen::Vector3d* at_last_position_n);
   // The model's force at x, within the bounds above (count: into stats_).
   Eigen::Vector3d Evaluate(const ActiveModel& active, const Eigen::Vector3d& position_m, bool count = true);
 
@@ -122,6 +176,12 @@ class ForceRenderer {
   Eigen::Vector3d held_force_n_ = Eigen::Vector3d::Zero();  // newest finite force
   ActiveModel current_, previous_;
   int blend_tick_ = 0;  // ticks since current_ took over from previous_
+  // Stiffness along the normal of the last contact model, as rendered (scaled), N/m; 0 before.
+  double last_normal_stiffness_n_per_m_ = 0.0;
+  // Local friction: the anchor (m, valid while in contact) and its spring, N/m.
+  Eigen::Vector3d anchor_m_ = Eigen::Vector3d::Zero();
+  bool anchor_valid_ = false;
+  double tangential_stiffness_n_per_m_ = 0.0;
   Eigen::Vector3d last_position_m_ = Eigen::Vector3d::Constant(std::nan(""));  // the previous tick's
   Eigen::Vector3d motion_change_n_ = Eigen::Vector3d::Zero();
 };

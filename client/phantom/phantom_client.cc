@@ -11,6 +11,7 @@
 
 #include "common/error.h"
 #include "common/realtime.h"
+#include "render_chain.h"
 #include "service/dds.h"
 #include "service/server_choice.h"
 
@@ -184,6 +185,9 @@ void PhantomClient::PushArrival(uint64_t pose_sequence, int64_t client_time_ns, 
       }
       r.model.normal = Eigen::Vector3d(m.normal.x, m.normal.y, m.normal.z);
       r.model.friction_coefficient = m.friction_coefficient;
+      r.model.surface_ahead = m.surface_ahead;
+      r.model.surface_gap_m = m.surface_gap_m;
+      r.model.surface_normal = Eigen::Vector3d(m.surface_normal.x, m.surface_normal.y, m.surface_normal.z);
     }
     if (r.verdict == ServerVerdict::kStepped) newest_arrival_sequence_ = std::max(newest_arrival_sequence_, pose_sequence);
     arrivals_head_.store(head + 1, std::memory_order_release);
@@ -279,8 +283,9 @@ void PhantomClient::Run(const std::atomic<bool>& stop, const std::function<void(
   const auto period_ns = static_cast<int64_t>(std::llround(tick_s * 1e9));
   const auto& trajectory = config_.trajectory;
   const int trajectory_ticks = static_cast<int>(trajectory.size()) - 1;
-  SafetyFilter safety(config_.safety);
-  ForceRenderer renderer(config_.render);
+  RenderChain chain(config_.render, config_.safety);
+  const ForceRenderer& renderer = chain.renderer();
+  const SafetyFilter& safety = chain.safety();
   HandModel hand(config_.hand, trajectory[0]);
 
   hapco_idl_DevicePose pose{};
@@ -396,16 +401,8 @@ void PhantomClient::Run(const std::atomic<bool>& stop, const std::function<void(
       pose.reported_round_trip_ns = r.arrival_ns - r.client_time_ns;
       taken.push_back(r);
     }
-    // Direct mode renders arrivals as they come (the safety filter holds them between
-    // arrivals); local-model and passivity change the command every tick.
-    const Eigen::Vector3d command = renderer.Command(fresh, raw, model, position, velocity, tick_s);
-    if (renderer.changes_between_arrivals() && (!fresh || raw.allFinite())) {
-      if (!fresh) safety.Retarget(command);
-      rendered = safety.Update(fresh, command, now_s, renderer.motion_change_n());
-    } else {
-      rendered = safety.Update(fresh, raw, now_s);  // direct, or a non-finite arrival (rejected, counted)
-    }
-    rendered = renderer.Damp(rendered, velocity, tick_s, config_.safety.max_force_n);
+    rendered = chain.Tick(fresh, raw, model, position, velocity, now_s);
+    const Eigen::Vector3d& command = chain.command_n();
     stats_.peak_rendered_n = std::max(stats_.peak_rendered_n, rendered.norm());
     const bool stale = safety.stale();
     if (stale && !was_stale) {

@@ -95,8 +95,11 @@ TEST(ForceRenderer, TheModelNeverPulls) {
   EXPECT_GT(r.stats().pull_prevented, 0u);
 }
 
-TEST(ForceRenderer, TheTangentialPartStaysInTheFrictionCone) {
-  ForceRenderer r(LocalModel());
+TEST(ForceRenderer, TheModelsTangentialPartStaysInTheFrictionCone) {
+  // The linear model (the first version) renders the model's tangential force, within the cone.
+  RendererParameters p = LocalModel();
+  p.contact_rendering = ContactRendering::kLinear;
+  ForceRenderer r(p);
   const ReceivedModel m = TopFaceModel(-1e-3, 1000, 0.3);
   // 4 mm sideways at the same depth: 2 N up, 2 N across (500 N/m x 4 mm) > 0.3 x 2 N.
   const Eigen::Vector3d f = RenderAt(&r, {0, 0, 2}, m, {4e-3, 0, -1e-3}, 10);
@@ -105,25 +108,101 @@ TEST(ForceRenderer, TheTangentialPartStaysInTheFrictionCone) {
   EXPECT_GT(r.stats().cone_limited, 0u);
   // The server's own force at the model's pose is never changed by the limit, even outside
   // the scene's cone (an edge contact can tilt the resultant).
-  ForceRenderer s(LocalModel());
+  ForceRenderer s(p);
   const Eigen::Vector3d at_pose = RenderAt(&s, {1.5, 0, 2}, m, m.position_m, 10);
   EXPECT_NEAR((at_pose - Eigen::Vector3d(1.5, 0, 2)).norm(), 0.0, 1e-12);
 }
 
-TEST(ForceRenderer, StiffnessAndExtrapolationAreCapped) {
+TEST(ForceRenderer, AStifferContactIsASofterWallAtTheSamePlace) {
   RendererParameters p = LocalModel();
   p.max_stiffness_n_per_m = 3000;
   p.max_extrapolation_m = 0.005;
   ForceRenderer r(p);
   const ReceivedModel stiff = TopFaceModel(-1e-3, 1e6, 0.5);  // a rigid contact's W: huge K
-  // 1 um further in: 3000 N/m (the cap, along the stiffest direction) x 1 um.
+  // Its surface is where the model's force vanishes: 2 N / 1e6 N/m = 2 um above the pose
+  // answered. 1 um further in the device is 3 um through it, and the wall it feels is the cap:
+  // 3000 N/m x 3 um (not 2 N + 3000 N/m x 1 um, a full force re-anchored at a delayed pose).
   const Eigen::Vector3d f = RenderAt(&r, {0, 0, 2}, stiff, {0, 0, -1.001e-3}, 10);
-  EXPECT_NEAR(f.z(), 2.0 + 3000 * 1e-6, 1e-9);
+  EXPECT_NEAR(f.z(), 3000 * 3e-6, 1e-12);
   EXPECT_EQ(r.stats().stiffness_capped, 1u);
-  // 10 mm further in is evaluated at 5 mm: 2 + 3000 x 5 mm.
+  // 10 mm further in is evaluated at 5 mm: 3000 N/m x (5 mm + 2 um).
   const Eigen::Vector3d far = r.Command(false, {0, 0, 2}, stiff, {0, 0, -11e-3}, {}, kTick);
-  EXPECT_NEAR(far.z(), 2.0 + 3000 * 5e-3, 1e-9);
+  EXPECT_NEAR(far.z(), 3000 * 5.002e-3, 1e-9);
   EXPECT_GT(r.stats().extrapolation_capped, 0u);
+}
+
+TEST(ForceRenderer, NormalAndTangentialStiffnessAreCappedApart) {
+  // A sticking contact on a bar clamped at both ends: 8000 N/m along the bar, 1000 N/m into
+  // it. The tangential stiffness must not soften the normal one: 0.5 mm further in is
+  // 2 N + 1000 N/m x 0.5 mm, as without a cap.
+  ForceRenderer r(LocalModel());
+  ReceivedModel m = TopFaceModel(-1e-3, 1000, 0.5);
+  m.stiffness_n_per_m = Eigen::Vector3d(-8000, -8000, -1000).asDiagonal();
+  const Eigen::Vector3d f = RenderAt(&r, {0, 0, 2}, m, {0, 0, -1.5e-3}, 10);
+  EXPECT_NEAR(f.z(), 2.5, 1e-12);
+  EXPECT_EQ(r.stats().stiffness_capped, 1u);
+  // The first version capped the largest direction: 1000 x 3000 / 8000 N/m into the bar.
+  RendererParameters first = LocalModel();
+  first.contact_rendering = ContactRendering::kLinear;
+  ForceRenderer v1(first);
+  EXPECT_NEAR(RenderAt(&v1, {0, 0, 2}, m, {0, 0, -1.5e-3}, 10).z(), 2.0 + 375.0 * 0.5e-3, 1e-12);
+}
+
+TEST(ForceRenderer, FrictionSticksAndSlipsOnTheDevice) {
+  // Contact at z = -1 mm: 2 N up, 1000 N/m into the bar, sticking 8000 N/m along it (the
+  // anchor's spring is capped to 3000 N/m), mu = 0.5: the cone allows 1 N across.
+  ForceRenderer r(LocalModel());
+  ReceivedModel m = TopFaceModel(-1e-3, 1000, 0.5);
+  m.stiffness_n_per_m = Eigen::Vector3d(-8000, -8000, -1000).asDiagonal();
+  const Eigen::Vector3d start(0, 0, -1e-3);
+  EXPECT_NEAR(RenderAt(&r, {0, 0, 2}, m, start, 10).x(), 0.0, 1e-12) << "the anchor is where contact began";
+  // 0.1 mm along +x: the spring holds, -3000 N/m x 0.1 mm.
+  Eigen::Vector3d f = r.Command(false, {}, m, start + Eigen::Vector3d(1e-4, 0, 0), {}, kTick);
+  EXPECT_NEAR(f.x(), -0.3, 1e-12);
+  EXPECT_NEAR(f.z(), 2.0, 1e-12);
+  // 0.5 mm: 1.5 N would leave the cone: it slips at mu x 2 N, the anchor follows.
+  f = r.Command(false, {}, m, start + Eigen::Vector3d(5e-4, 0, 0), {}, kTick);
+  EXPECT_NEAR(f.x(), -1.0, 1e-12);
+  EXPECT_GT(r.stats().cone_limited, 0u);
+  // Back by 0.1 mm: it sticks again on the moved anchor, -1 N + 0.3 N.
+  f = r.Command(false, {}, m, start + Eigen::Vector3d(4e-4, 0, 0), {}, kTick);
+  EXPECT_NEAR(f.x(), -0.7, 1e-12);
+  // A new model from the server (a delayed pose) does not move the anchor: same force here.
+  f = RenderAt(&r, {-0.9, 0, 2}, m, start + Eigen::Vector3d(4e-4, 0, 0), 10);
+  EXPECT_NEAR(f.x(), -0.7, 1e-12);
+  // Out of contact the anchor is dropped; the next contact's anchor is placed where the
+  // server's newest model puts the tangential force (-8000 N/m x 0.1 mm), and the device's
+  // spring (3000 N/m) holds it from there.
+  r.Command(false, {}, m, Eigen::Vector3d(0, 0, 5e-3), {}, kTick);
+  EXPECT_NEAR(RenderAt(&r, {0, 0, 2}, m, Eigen::Vector3d(1e-4, 0, -1e-3), 10).x(), -0.8, 1e-12);
+  EXPECT_NEAR(r.Command(false, {}, m, Eigen::Vector3d(1.5e-4, 0, -1e-3), {}, kTick).x(), -0.8 - 0.15, 1e-12);
+}
+
+TEST(ForceRenderer, TheSurfaceAheadIsFeltWhereTheDeviceMeetsIt) {
+  ForceRenderer r(LocalModel());
+  ReceivedModel ahead;  // no contact at z = +2 mm; the top face 2 mm below, pushing up
+  ahead.position_m = Eigen::Vector3d(0, 0, 2e-3);
+  ahead.surface_ahead = true;
+  ahead.surface_gap_m = 2e-3;
+  ahead.surface_normal = Eigen::Vector3d::UnitZ();
+  EXPECT_EQ(RenderAt(&r, Eigen::Vector3d::Zero(), ahead, {0, 0, 1e-3}, 10), Eigen::Vector3d::Zero());
+  // 0.5 mm through it: before any contact model, the cap (3000 N/m).
+  Eigen::Vector3d f = r.Command(false, Eigen::Vector3d::Zero(), ahead, {0, 0, -0.5e-3}, {}, kTick);
+  EXPECT_NEAR(f.z(), 1.5, 1e-12);
+  EXPECT_NEAR(f.head<2>().norm(), 0.0, 1e-12);
+  EXPECT_GT(r.stats().surface_ticks, 0u);
+  // Beyond the surface's reach from the pose it answered (10 mm): nothing.
+  EXPECT_EQ(r.Command(false, Eigen::Vector3d::Zero(), ahead, {0.02, 0, -0.5e-3}, {}, kTick), Eigen::Vector3d::Zero());
+  // After a contact model (1000 N/m into the surface), a surface ahead has its stiffness.
+  RenderAt(&r, {0, 0, 2}, TopFaceModel(-2e-3, 1000, 0.5), {0, 0, -2e-3}, 10);
+  r.Command(false, {}, {}, {0, 0, 5e-3}, {}, kTick);  // lift off: the friction anchor goes
+  f = RenderAt(&r, Eigen::Vector3d::Zero(), ahead, {0, 0, -0.5e-3}, 10);
+  EXPECT_NEAR(f.z(), 0.5, 1e-12);
+  // A surface ahead with a bad normal is no model.
+  ForceRenderer s(LocalModel());
+  ahead.surface_normal = Eigen::Vector3d(0, 0, 2);
+  EXPECT_EQ(RenderAt(&s, Eigen::Vector3d::Zero(), ahead, {0, 0, -0.5e-3}, 10), Eigen::Vector3d::Zero());
+  EXPECT_EQ(s.stats().surfaces_received, 0u);
 }
 
 TEST(ForceRenderer, ANewModelTakesOverWithoutAJump) {
@@ -197,7 +276,7 @@ struct LoopRun {
   bool finite = true;
 };
 
-LoopRun RunDelayedWall(RendererParameters parameters, int delay_ticks) {
+LoopRun RunDelayedWall(RendererParameters parameters, int delay_ticks, double tangential_k = 0.0) {
   const double mass = 0.05, device_damping = 0.5, hand_k = 300.0, wall_k = 2000.0, target = -0.002;
   ForceRenderer renderer(parameters);
   SafetyFilter safety;
@@ -215,8 +294,12 @@ LoopRun RunDelayedWall(RendererParameters parameters, int delay_ticks) {
     ReceivedModel model;
     model.valid = answered < 0;
     model.position_m = Eigen::Vector3d(0, 0, answered);
-    model.stiffness_n_per_m = Eigen::Vector3d(0, 0, -wall_k).asDiagonal();
+    model.stiffness_n_per_m = Eigen::Vector3d(-tangential_k, -tangential_k, -wall_k).asDiagonal();
     model.normal = Eigen::Vector3d::UnitZ();
+    // Apart, the server sends the surface ahead (sim/surface_ahead.h): the wall at z = 0.
+    model.surface_ahead = answered >= 0;
+    model.surface_gap_m = std::max(answered, 0.0);
+    model.surface_normal = Eigen::Vector3d::UnitZ();
     const Eigen::Vector3d velocity(0, 0, v);
     const Eigen::Vector3d command = renderer.Command(true, force, model, Eigen::Vector3d(0, 0, x), velocity, kTick);
     const Eigen::Vector3d limited = safety.Update(true, command, n * kTick, renderer.motion_change_n());
@@ -276,9 +359,41 @@ TEST(ForceRenderer, TheLocalModelHoldsADelayedWallWhereDirectRenderingBounces) {
     // (100 N s/m) and the 7.9 N clamp bind beyond 5 ms (measured -3e-4 .. -3e-3 J), still
     // >= 100 times less than without it.
     EXPECT_GE(mp.min_energy_j, -1e-4);
+    // With the surface ahead even the model alone stays passive: the wall is felt where it is
+    // met and the model's field does not depend on the delayed pose.
+    EXPECT_GE(m.min_energy_j, -1e-4);
     EXPECT_GT(dp.min_energy_j, 0.01 * d.min_energy_j);
     if (delay <= 5) {
       EXPECT_GE(dp.min_energy_j, -1e-4);
+    }
+  }
+}
+
+TEST(ForceRenderer, AStiffStickingContactDoesNotSoftenTheDelayedWall) {
+  // The same wall, now sticking across at 8000 N/m (a bar clamped at both ends, sliding along
+  // it), above the 3000 N/m cap. The first version capped the model by its stiffest direction,
+  // so the wall was rendered at 750 N/m re-anchored on the delayed force: the 1250 N/m left
+  // out acted as a spring one round trip late and the device rang (docs/network-haptics.md).
+  // Capped per direction, the wall's own 2000 N/m stays and nothing is left delayed.
+  const double equilibrium_z = 300.0 * -0.002 / (300.0 + 2000.0);
+  RendererParameters now = LocalModel(), first = LocalModel();
+  first.contact_rendering = ContactRendering::kLinear;
+  for (int delay : {50, 100, 200}) {
+    for (bool passivity : {false, true}) {
+      now.passivity = first.passivity = passivity;
+      const LoopRun n = RunDelayedWall(now, delay, 8000.0), f = RunDelayedWall(first, delay, 8000.0);
+      std::printf("round trip %3d ms, sticking 8000 N/m across%s: bounce %.4f mm (first version %.4f mm), "
+                  "final z %.4f mm, min E %.3g J (first version %.3g J)\n",
+                  delay, passivity ? ", passivity" : "", n.bounce_m * 1e3, f.bounce_m * 1e3, n.final_z_m * 1e3,
+                  n.min_energy_j, f.min_energy_j);
+      EXPECT_TRUE(n.finite);
+      EXPECT_LE(n.max_force_n, 7.9 + 1e-12);
+      EXPECT_LT(n.bounce_m, 0.01e-3) << delay << " ms";
+      EXPECT_NEAR(n.final_z_m, equilibrium_z, 0.01e-3);
+      EXPECT_GE(n.min_energy_j, -1e-4);
+      if (!passivity) {
+        EXPECT_GT(f.bounce_m, 0.1e-3) << "the first version rings at " << delay << " ms";
+      }
     }
   }
 }
