@@ -5,8 +5,10 @@
   network_haptics.py analyse --runs-dir DIR --out CSV --figures PREFIX
   network_haptics.py plot --csv CSV --figures PREFIX    (the stability chart from the CSV)
 
-The hand intent: start 1 mm above the surface, press towards 8 mm inside over 0.5 s, hold 1 s,
-slide 10 mm along +x over 1 s, hold 1 s, lift over 0.3 s, rest 0.2 s. The hand (a 300 N/m
+The hand intent: hover 1 mm above the surface for 0.5 s (the device is connected before the user
+presses: at a 200 ms round trip no answer, not even the surface ahead, can arrive sooner), press
+towards 8 mm inside over 0.5 s, hold 1 s, slide 10 mm along +x over 1 s, hold 1 s, lift over
+0.3 s, rest 0.2 s. The hand (a 300 N/m
 spring, hapco-phantom --mode hand) drags the device along it; the rendered force pushes back.
 
 Per run (DIR/<case>/<mode>/ticks-*.csv and summary.csv), against the reference run (mode
@@ -28,7 +30,7 @@ import sys
 TICK_S = 1e-3
 START_Z, TARGET_Z, SLIDE_X = 0.001, -0.008, 0.010
 PHASES = [  # (name, seconds)
-    ("approach", 0.5), ("hold-press", 1.0), ("slide", 1.0), ("hold-slide", 1.0), ("lift", 0.3), ("rest", 0.2)]
+    ("hover", 0.5), ("approach", 0.5), ("hold-press", 1.0), ("slide", 1.0), ("hold-slide", 1.0), ("lift", 0.3), ("rest", 0.2)]
 HOLDS = ("hold-press", "hold-slide")
 MODES = ["direct", "direct+passivity", "local-model", "local-model+passivity"]
 FLOOR = "direct-repeat"  # direct again at round trip 0: the run-to-run floor of the force error
