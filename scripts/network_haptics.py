@@ -18,6 +18,8 @@ direct, round trip 0, no loss, no jitter: "the no-delay run of the same hand int
   oscillation_hz        its frequency (zero crossings of the height minus its mean), 0 if < 0.05 mm
   force_rms_error_n/_pct  RMS over ticks of |F - F_ref| (N, % of the reference's peak |F|)
   force_peak_error_n/_pct the largest |F - F_ref|
+  force_rms_error_normal_pct / _tangential_pct  the RMS error split into its z and xy parts (% of
+                        the reference's peak): the normal force, and the friction
   sink_mm               how much deeper the device went than in the reference (deepest z)
   timeouts, dissipated_j, model_ticks, lost_pct   from the summary
 """
@@ -129,6 +131,10 @@ def analyse(args):
                 summary = [r for r in csv.DictReader(f) if r["client"] == "all"][0]
             ticks = read_ticks(ticks_path)
             errors = [norm([a - b for a, b in zip(ticks[t][2], reference[t][2])]) for t in reference if t in ticks]
+            normal_errors = [ticks[t][2][2] - reference[t][2][2] for t in reference if t in ticks]
+            across_errors = [norm([ticks[t][2][0] - reference[t][2][0], ticks[t][2][1] - reference[t][2][1]])
+                             for t in reference if t in ticks]
+            split = lambda e: round(100 * math.sqrt(sum(v * v for v in e) / len(e)) / ref_peak, 2) if e else float("nan")
             rms = math.sqrt(sum(e * e for e in errors) / len(errors)) if errors else float("nan")
             peak = max(errors) if errors else float("nan")
             osc_mm, osc_hz = oscillation(ticks)
@@ -140,6 +146,8 @@ def analyse(args):
                 "oscillation_mm": round(osc_mm, 4), "oscillation_hz": round(osc_hz, 2),
                 "force_rms_error_n": round(rms, 4), "force_rms_error_pct": round(100 * rms / ref_peak, 2),
                 "force_peak_error_n": round(peak, 4), "force_peak_error_pct": round(100 * peak / ref_peak, 2),
+                "force_rms_error_normal_pct": split(normal_errors),
+                "force_rms_error_tangential_pct": split(across_errors),
                 "sink_mm": round((ref_deepest - deepest) * 1e3, 4),
                 "timeouts": int(summary["server_losses"]), "dissipated_j": float(summary["passivity_dissipated_j"]),
                 "model_ticks": int(summary["model_ticks"]), "lost_pct": float(summary["lost_pct"]),

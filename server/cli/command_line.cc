@@ -256,16 +256,18 @@ CLI::Option* CommandLine::AddForceTimeout(double* milliseconds) {
 
 void CommandLine::AddRendering(std::string* mode, double* max_model_stiffness_n_per_m) {
   AddChoice("--render", mode, {"auto", "direct", "direct+passivity", "local-model", "local-model+passivity"},
-            "direct: the newest force, held until the next; local-model: the contact model sent with the "
-            "newest force (stiffness, normal, friction) evaluated at the device's current position every "
-            "tick; +passivity: a time-domain passivity controller on what is rendered (the energy it "
-            "dissipates is reported). auto (default): direct with --mode kinematic (forces compare with "
-            "hapco-sim), local-model+passivity with --mode hand (passive and without oscillation up to a "
-            "50 ms round trip, docs/network-haptics.md)",
+            "direct: the newest force, held until the next; local-model: the model sent with the newest "
+            "force at the device's current position every tick (in contact the contact's plane, with "
+            "friction on the device; apart the obstacle surface ahead); +passivity: a time-domain passivity "
+            "controller on what is rendered (the energy it dissipates is reported). auto (default): direct "
+            "with --mode kinematic (forces compare with hapco-sim), local-model+passivity with --mode hand "
+            "(passive and without oscillation up to a 200 ms round trip and 10 % loss, "
+            "docs/network-haptics.md)",
             "Device");
   AddNumber("--max-model-stiffness-n-per-m", max_model_stiffness_n_per_m, "K",
-            "local-model: the model's stiffness is scaled down to at most K N/m (default 3000, what the "
-            "device renders stably)",
+            "local-model: a contact stiffer than K N/m is rendered as the same wall made softer, at the "
+            "same place; friction's lateral spring is capped to K too (default 3000, what the device "
+            "renders stably)",
             "Device", 0, HUGE_VAL, true);
 }
 

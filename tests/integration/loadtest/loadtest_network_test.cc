@@ -156,7 +156,7 @@ TEST(LoadTestNetwork, DelayShowsInTheRoundTripAndTheSafetyRampEngagesWhenTheLink
 }
 
 // Network haptics in CI (docs/network-haptics.md): benchmark 1 in hand mode, the hand intent of
-// scripts/network_haptics.py (press, hold, slide, hold, lift), 20 ms round trip (10 ms each
+// scripts/network_haptics.py (hover, press, hold, slide, hold, lift), 20 ms round trip (10 ms each
 // way). In the same server run, direct rendering and the best mode (local-model+passivity,
 // the clients' default for a hand-held device): direct generates energy (the passivity
 // observer goes well below 0), the best mode stays passive within the load tests' 1e-4 J;
@@ -176,7 +176,7 @@ TEST(LoadTestNetwork, TheBestModeStaysPassiveAtARoundTripWhereDirectRenderingIsN
   const std::string scene = std::string(HAPCO_SOURCE_DIR) + "/proto/scenes/benchmark1.txtpb";
   const std::string server = std::string(HAPCO_SERVER_EXE) + " " + scene + " --domain " + domain + " --quiet";
   auto run = [&](const char* render, const char* out) {
-    return std::string("'") + HAPCO_LOADTEST_EXE + "' '" + scene + "' --clients 1 --duration-s 4.2 --mode hand" +
+    return std::string("'") + HAPCO_LOADTEST_EXE + "' '" + scene + "' --clients 1 --duration-s 4.7 --mode hand" +
            " --trajectory '" + intent + "' --render " + render + " --client-prefix nh --domain " + domain +
            " --csv-dir '" + dir + "/" + out + "' --rt-priority 80 --connect-timeout-s 60 --quiet";
   };
