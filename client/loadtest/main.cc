@@ -235,6 +235,9 @@ double LostPct(const Row& r) {
 struct ServerSummary {
   int periods = 0;
   double step_p50_us = 0, step_p99_us = 0, step_max_us = 0, cpu_use = 0;
+  // Mean per stepped pose over the periods (ServerStatus): physics, local model, force write,
+  // contact frame, us.
+  double physics_us = 0, model_us = 0, force_write_us = 0, frame_us = 0;
   unsigned sessions_max = 0;
   uint64_t steps = 0, superseded = 0, non_finite = 0;
 };
@@ -258,11 +261,19 @@ ServerSummary SummarizeServer(const std::vector<StatusSample>& all, double windo
     p99.push_back(s->status.step_time_p99_us);
     out.step_max_us = std::max(out.step_max_us, s->status.step_time_max_us);
     out.cpu_use += s->status.cpu_use;
+    out.physics_us += s->status.physics_mean_us;
+    out.model_us += s->status.model_mean_us;
+    out.force_write_us += s->status.force_write_mean_us;
+    out.frame_us += s->status.frame_mean_us;
     out.sessions_max = std::max(out.sessions_max, static_cast<unsigned>(s->status.sessions));
   }
   out.step_p50_us = hapco::QuantileOf(p50, 0.5);
   out.step_p99_us = hapco::QuantileOf(p99, 0.5);
   out.cpu_use /= static_cast<double>(in.size());
+  out.physics_us /= static_cast<double>(in.size());
+  out.model_us /= static_cast<double>(in.size());
+  out.force_write_us /= static_cast<double>(in.size());
+  out.frame_us /= static_cast<double>(in.size());
   out.steps = in.back()->status.steps - in.front()->status.steps;
   out.superseded = in.back()->status.superseded - in.front()->status.superseded;
   out.non_finite = in.back()->status.non_finite_forces - in.front()->status.non_finite_forces;
@@ -307,14 +318,15 @@ constexpr const char* kSummaryHeader =
     "rt_p999_us,rt_max_us,render_p50_us,render_p99_us,tracking_rms_n,server_rms_n,d2_rendered_ms_n2,"
     "d2_server_ms_n2,hf_ratio,passivity_min_j,passivity_final_j,passivity_max_drop_j,passivity_violated,"
     "server_step_p50_us,server_step_p99_us,server_step_max_us,server_cpu,server_status_periods,server_sessions_max,"
-    "server_superseded,render,passivity_controller,passivity_dissipated_j,model_ticks\n";
+    "server_superseded,render,passivity_controller,passivity_dissipated_j,model_ticks,server_physics_us,"
+    "server_model_us,server_force_write_us,server_frame_us\n";
 
 void WriteSummaryRow(std::FILE* f, const Row& r, const Options& o, const ServerSummary& s, double tolerance_j) {
   const auto& st = r.stability;
   std::fprintf(f,
                "%s,%d,%s,%g,%g,%d,%llu,%llu,%llu,%llu,%.4f,%llu,%.4f,%llu,%llu,%llu,%llu,%llu,%llu,%llu,%llu,%.6f,%.6f,"
                "%.1f,%.1f,%.1f,%.1f,%.1f,%.1f,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%d,%.1f,%.1f,%.1f,%.3f,%d,%u,%llu,"
-               "%s,%d,%.6g,%llu\n",
+               "%s,%d,%.6g,%llu,%.1f,%.1f,%.1f,%.1f\n",
                r.client.c_str(), o.clients, o.mode.c_str(), o.duration_s, o.timeout_ms, r.ticks_run,
                static_cast<unsigned long long>(r.poses), static_cast<unsigned long long>(r.forces),
                static_cast<unsigned long long>(r.reordered), static_cast<unsigned long long>(r.missed), MissedPct(r),
@@ -328,7 +340,8 @@ void WriteSummaryRow(std::FILE* f, const Row& r, const Options& o, const ServerS
                st.d2_server_ms_n2, st.hf_ratio, r.passivity_min_j, r.passivity_final_j, r.passivity_max_drop_j,
                r.passivity_min_j < -tolerance_j ? 1 : 0, s.step_p50_us, s.step_p99_us, s.step_max_us, s.cpu_use,
                s.periods, s.sessions_max, static_cast<unsigned long long>(s.superseded),
-               hapco::phantom::RenderingName(o.rendering).c_str(), o.rendering.passivity ? 1 : 0, r.dissipated_j, static_cast<unsigned long long>(r.model_ticks));
+               hapco::phantom::RenderingName(o.rendering).c_str(), o.rendering.passivity ? 1 : 0, r.dissipated_j,
+               static_cast<unsigned long long>(r.model_ticks), s.physics_us, s.model_us, s.force_write_us, s.frame_us);
 }
 
 void PrintRow(const Row& r) {

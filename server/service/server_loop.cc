@@ -174,6 +174,12 @@ void ServerLoop::CloseSession(std::map<std::string, Client>::iterator it) {
   closed_session_counters_.contact_frames_dropped += c.contact_frames_dropped;
   closed_session_counters_.sequence_gaps += c.sequence_gaps;
   closed_session_counters_.ignored_notices += c.ignored_notices;
+  const SessionStageTimes t = it->second.session->TakeStageTimes();
+  stage_times_.physics_ns += t.physics_ns;
+  stage_times_.model_ns += t.model_ns;
+  stage_times_.force_write_ns += t.force_write_ns;
+  stage_times_.frame_ns += t.frame_ns;
+  stage_times_.poses += t.poses;
   Log(kLogSession, "session closed for '" + it->first + "'");
   sessions_.erase(it);
   ++counters_.sessions_closed;
@@ -533,7 +539,28 @@ void ServerLoop::PublishStatus(int64_t now_ns, bool period_end) {
   status->superseded = all.superseded;
   status->contact_frames_dropped = all.contact_frames_dropped;
   status->non_finite_forces = all.non_finite_forces;
-  if (period_end) step_times_us_.clear();
+  // Stage split: sessions' sums since the last period end (their times are taken only then, so
+  // a status published early reports the running period).
+  SessionStageTimes stages = stage_times_;
+  for (auto& [id, client] : sessions_) {
+    const SessionStageTimes t = period_end ? client.session->TakeStageTimes() : client.session->stage_times();
+    stages.physics_ns += t.physics_ns;
+    stages.model_ns += t.model_ns;
+    stages.force_write_ns += t.force_write_ns;
+    stages.frame_ns += t.frame_ns;
+    stages.poses += t.poses;
+  }
+  if (stages.poses > 0) {
+    const double per_pose_us = 1e-3 / static_cast<double>(stages.poses);
+    status->physics_mean_us = static_cast<double>(stages.physics_ns) * per_pose_us;
+    status->model_mean_us = static_cast<double>(stages.model_ns) * per_pose_us;
+    status->force_write_mean_us = static_cast<double>(stages.force_write_ns) * per_pose_us;
+    status->frame_mean_us = static_cast<double>(stages.frame_ns) * per_pose_us;
+  }
+  if (period_end) {
+    step_times_us_.clear();
+    stage_times_ = {};
+  }
   if (status_writer_.Write(*status) == DDS_RETCODE_OK) ++counters_.status_published;
 }
 

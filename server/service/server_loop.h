@@ -166,6 +166,8 @@ class ServerLoop {
   std::vector<ServerAnnouncement> peers_;  // the other servers' newest announcements
   bool serves_unaddressed_ = true;         // ServesUnaddressed over peers_, per loop iteration
   std::size_t announced_sessions_ = 0;     // sessions in the last status published
+  // Stage times of sessions closed during the current status period (their sums are kept).
+  SessionStageTimes stage_times_;
   // Never written: a contact-state writer in a partition of its own, so that its matched
   // readers are the wildcard (hapco/client/*) readers, i.e. the recorders present. A new
   // session opens once its own writer has matched as many (Session::TryOpen).

@@ -71,7 +71,9 @@ int64_t Session::StepAndPublish(const hapco_idl_DevicePose& pose, int64_t receiv
   const Eigen::Vector3d p(pose.position_m.x, pose.position_m.y, pose.position_m.z);
   counters_.sequence_gaps += stream_.Accept(pose);
   static const sim::StepOutput kNoPhysics{};  // zero force, no contact, step 0
+  const int64_t start_ns = MonotonicNowNs();
   const sim::StepOutput& out = physics_ == SessionPhysics::kContact ? sim_.Step(p) : kNoPhysics;
+  const int64_t physics_ns = MonotonicNowNs();
   ++counters_.steps;
   Eigen::Vector3d force_n = out.device_force_n;
   const bool force_finite = force_n.allFinite();
@@ -97,6 +99,7 @@ int64_t Session::StepAndPublish(const hapco_idl_DevicePose& pose, int64_t receiv
   FillLocalModel(force_finite);
   force_.server_send_ns = MonotonicNowNs();
   if (force_writer_->Write(force_) != DDS_RETCODE_OK) ++counters_.force_write_errors;
+  const int64_t written_ns = MonotonicNowNs();
   // This answer becomes the newest of the next force's repeated answers.
   std::move_backward(force_.recent, force_.recent + hapco_idl_RECENT_SAMPLES - 1, force_.recent + hapco_idl_RECENT_SAMPLES);
   force_.recent[0] = {force_.pose_sequence, force_.client_time_ns, force_.force_n};
@@ -116,7 +119,13 @@ int64_t Session::StepAndPublish(const hapco_idl_DevicePose& pose, int64_t receiv
   frame_->sticking_count = force_.sticking_count;
   frame_->sliding_count = force_.sliding_count;
   if (contact_writer_.Write(*frame_) != DDS_RETCODE_OK) ++counters_.contact_frames_dropped;
-  return MonotonicNowNs() - receive_ns;
+  const int64_t end_ns = MonotonicNowNs();
+  stage_times_.physics_ns += physics_ns - start_ns;
+  stage_times_.model_ns += force_.server_send_ns - physics_ns;
+  stage_times_.force_write_ns += written_ns - force_.server_send_ns;
+  stage_times_.frame_ns += end_ns - written_ns;
+  ++stage_times_.poses;
+  return end_ns - receive_ns;
 }
 
 void Session::NotifyIgnored(const hapco_idl_DevicePose& pose, int64_t receive_ns, PoseVerdict verdict) {

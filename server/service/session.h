@@ -38,6 +38,15 @@ struct SessionCounters {
   uint64_t ignored_notices = 0;        // FeedbackForce notices sent about them
 };
 
+// Where the stepped poses' time went since the last TakeStageTimes (sums, ns).
+struct SessionStageTimes {
+  int64_t physics_ns = 0;      // TwoBodySession::Step
+  int64_t model_ns = 0;        // the local model (and the surface ahead) for FeedbackForce.model
+  int64_t force_write_ns = 0;  // the FeedbackForce write
+  int64_t frame_ns = 0;        // filling and writing the ContactStateFrame
+  uint64_t poses = 0;
+};
+
 // What a session computes per pose. kNone is the load tests' floor: the same DDS path,
 // QoS, validation and samples (a force and an empty contact frame per pose), no contact
 // computation and a zero force, so `capacity(contact) / capacity(none)` says how much of the
@@ -89,6 +98,13 @@ class Session {
   void Reset();
 
   const SessionCounters& counters() const { return counters_; }
+  const SessionStageTimes& stage_times() const { return stage_times_; }
+  // The stage times since the last call, then zeroed (server thread, between batches).
+  SessionStageTimes TakeStageTimes() {
+    const SessionStageTimes t = stage_times_;
+    stage_times_ = {};
+    return t;
+  }
   const sim::StepOutput& last_output() const { return sim_.last_output(); }
   const sim::TwoBodyModel& model() const { return sim_.model(); }  // this session's scene
   uint64_t last_sequence() const { return stream_.last() ? stream_.last()->sequence : 0; }
@@ -108,6 +124,7 @@ class Session {
   const Topic<hapco_idl_FeedbackForce>* force_topic_;
   Writer<hapco_idl_ContactStateFrame> contact_writer_;
   std::optional<Writer<hapco_idl_FeedbackForce>> force_writer_;  // created by TryOpen
+  SessionStageTimes stage_times_;
   int64_t created_ns_;
   SamplePtr<hapco_idl_ContactStateFrame> frame_;  // reserved once, reused every step
   hapco_idl_FeedbackForce force_{};

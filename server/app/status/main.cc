@@ -81,13 +81,15 @@ int Run(const Options& o) {
       std::snprintf(
           line, sizeof(line),
           "hapco-status: server %s, domain %d, up %.1f s, %" PRIu32 " of %" PRIu32 " sessions, scenes %s, step p50 "
-          "%.0f us p99 %.0f us max %.0f us, status age %.3f s; bad input: nan %" PRIu64 ", workspace %" PRIu64
+          "%.0f us p99 %.0f us max %.0f us (mean per pose: physics %.0f, model %.0f, force write %.0f, contact "
+          "frame %.0f us), status age %.3f s; bad input: nan %" PRIu64 ", workspace %" PRIu64
           ", jumps %" PRIu64 ", out-of-order %" PRIu64 ", duplicates %" PRIu64 ", unknown clients %" PRIu64
           ", floods %" PRIu64,
           id.c_str(), o.domain, static_cast<double>(status->uptime_ns) * 1e-9,
           static_cast<uint32_t>(status->sessions), static_cast<uint32_t>(status->max_sessions),
           status->scene_names[0] != '\0' ? status->scene_names : "?", status->step_time_p50_us,
-          status->step_time_p99_us, status->step_time_max_us, age_s, c.bad_pose_nan, c.out_of_workspace,
+          status->step_time_p99_us, status->step_time_max_us, status->physics_mean_us, status->model_mean_us,
+          status->force_write_mean_us, status->frame_mean_us, age_s, c.bad_pose_nan, c.out_of_workspace,
           c.position_jumps, c.out_of_order, c.duplicates, c.unknown_clients, c.floods);
       if (lines.empty()) deadline = std::min(deadline, dds_time() + Seconds(o.server_id.empty() ? kOthersWindowS : 0));
       lines[id] = line;

@@ -433,6 +433,14 @@ TEST(ServerProcess, BadPosesAndInvalidClientIdAreCountedAndTheServerStaysUp) {
   EXPECT_EQ(status.sessions, 1u);  // neither the stranger nor the impersonated client got a session
   EXPECT_LE(status.step_time_p50_us, status.step_time_p99_us);
   EXPECT_LE(status.step_time_p99_us, status.step_time_max_us);
+  // The stage split (mean per pose) is part of each pose's time: its sum is at most the
+  // longest pose of the period.
+  const double stages_us =
+      status.physics_mean_us + status.model_mean_us + status.force_write_mean_us + status.frame_mean_us;
+  for (double v : {status.physics_mean_us, status.model_mean_us, status.force_write_mean_us, status.frame_mean_us}) {
+    EXPECT_TRUE(std::isfinite(v) && v >= 0.0) << v;
+  }
+  EXPECT_LE(stages_us, status.step_time_max_us + 1e-9);
 
   // A flood: bursts of 200 poses written back to back until the server counts extras (the
   // reader keeps 4 per client, so how many the server sees per burst varies; bounded).
