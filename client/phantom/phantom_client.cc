@@ -225,14 +225,28 @@ bool PhantomClient::Connect(std::string* why, const std::function<void(const std
   if (!config_.server_id.empty()) {
     server_id_ = config_.server_id;
   } else {
-    // Every server found (one pose reader each) announces itself at once (transient-local
-    // status); wait for their announcements, at most 2 s, then choose.
-    const uint32_t servers_found = dds_->pose_writer.MatchedReaders();
-    {
-      std::unique_lock<std::mutex> lock(dds_->servers_mutex);
-      dds_->servers_changed.wait_for(lock, std::chrono::seconds(2),
-                                     [&] { return dds_->servers.size() >= servers_found; });
+    // Servers on other hosts are discovered one at a time (unicast discovery: each pair of
+    // participants exchanges its own announcements), so the first one found is not all there
+    // are: wait until no further server has appeared for kServerDiscoverySettle, then for the
+    // announcements of every server found (transient-local status), at most 2 s in all, and
+    // choose. Without the settle window six clients started beside three servers in three
+    // network namespaces all chose the first server they saw.
+    const auto start = std::chrono::steady_clock::now();
+    const auto give_up = start + std::chrono::seconds(2);
+    uint32_t servers_found = dds_->pose_writer.MatchedReaders();
+    auto last_new = start;
+    std::unique_lock<std::mutex> lock(dds_->servers_mutex);
+    while (std::chrono::steady_clock::now() < give_up) {
+      dds_->servers_changed.wait_for(lock, std::chrono::milliseconds(20));
+      const uint32_t now_found = dds_->pose_writer.MatchedReaders();
+      const auto now = std::chrono::steady_clock::now();
+      if (now_found > servers_found) {
+        servers_found = now_found;
+        last_new = now;
+      }
+      if (now - last_new >= kServerDiscoverySettle && dds_->servers.size() >= servers_found) break;
     }
+    lock.unlock();
     server_id_ = ChooseServer("");
   }
   SendJoin();

@@ -14,6 +14,7 @@
 
 #include <array>
 #include <atomic>
+#include <chrono>
 #include <cstdint>
 #include <functional>
 #include <memory>
@@ -164,6 +165,8 @@ class PhantomClient {
 
   // Single-producer (receive thread) single-consumer (tick thread) queue of arrivals.
   static constexpr uint32_t kArrivalCapacity = 256;
+  // Connect: no new server for this long = every server of the domain has been found.
+  static constexpr std::chrono::milliseconds kServerDiscoverySettle{250};
   std::array<ReceivedForce, kArrivalCapacity> arrivals_;
   std::atomic<uint32_t> arrivals_head_{0};  // next slot to write (producer)
   std::atomic<uint32_t> arrivals_tail_{0};  // next slot to read (consumer)

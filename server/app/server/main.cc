@@ -180,6 +180,9 @@ int Run(const Options& options) {
   if (!options.trace_path.empty()) {
     trace.reset(std::fopen(options.trace_path.c_str(), "w"));
     if (!trace) throw hapco::InputError("cannot write " + options.trace_path);
+    // A line per stepped pose, written as it is made: a server killed mid-run (a host gone)
+    // leaves a trace of every pose it stepped.
+    std::setvbuf(trace.get(), nullptr, _IOLBF, 1024);
     std::fprintf(trace.get(), "client_id,sequence,x_m,y_m,z_m,fx_n,fy_n,fz_n,step_us\n");
     server_options.trace = trace.get();
   }
