@@ -190,7 +190,7 @@ int Run(const Options& options) {
     if (csv == nullptr) throw hapco::InputError("cannot write " + csv_path);
     std::fprintf(csv, "step,client_id,time_ns,dx_m,dy_m,dz_m,fx_n,fy_n,fz_n,device_fx_n,device_fy_n,device_fz_n,"
                       "separating,sticking,sliding,iterations,solver_status,solve_s,step_s,round_trip_s,"
-                      "pose_sequence,server_time_s,contacts_missing,contacts\n");
+                      "pose_sequence,server_time_s,contacts_missing,contacts,server_id\n");
     // Online recordings (hapco-recorder) carry the server's time per step but not the solve
     // and step timings of an offline run: those cells are left empty (unknown), not 0.
     const bool offline = std::any_of(records.begin(), records.end(), [](const auto& record) {
@@ -203,7 +203,7 @@ int Run(const Options& options) {
     };
     for (const auto* s : steps) {
       std::fprintf(csv, "%llu,%s,%lld,%.9g,%.9g,%.9g,%.12g,%.12g,%.12g,%.12g,%.12g,%.12g,%u,%u,%u,%u,%s,%s,%s,%.6g,"
-                   "%llu,%.6g,%d,%d\n",
+                   "%llu,%.6g,%d,%d,%s\n",
                    static_cast<unsigned long long>(s->step()), s->client_id().c_str(),
                    static_cast<long long>(s->time_ns()), s->device_translation_m().x(), s->device_translation_m().y(),
                    s->device_translation_m().z(), s->contact_force_n().x(), s->contact_force_n().y(),
@@ -211,7 +211,7 @@ int Run(const Options& options) {
                    s->separating(), s->sticking(), s->sliding(), s->iterations(), s->solver_status().c_str(),
                    seconds_or_empty(s->solve_s()).c_str(), seconds_or_empty(s->step_s()).c_str(), s->round_trip_s(),
                    static_cast<unsigned long long>(s->pose_sequence()),
-                   s->server_time_s(), s->contacts_missing() ? 1 : 0, s->contacts_size());
+                   s->server_time_s(), s->contacts_missing() ? 1 : 0, s->contacts_size(), s->server_id().c_str());
     }
     std::fclose(csv);
     std::printf("csv        %s\n", csv_path.c_str());
