@@ -142,7 +142,20 @@ struct Options {
   std::string out_dir = "free-interaction";
   bool with_tet10 = true;
   bool reference = false;
+  std::string reference_obstacle = "30,6,6";  // box divisions of the reference's obstacle (Tet10)
+  std::string reference_tool = "6,6,3";       // and of its tool (Tet10)
 };
+
+// "NX,NY,NZ" -> divisions, or InputError naming the option.
+Eigen::Vector3i Divisions(const std::string& text, const char* option) {
+  int x = 0, y = 0, z = 0;
+  char tail = 0;
+  if (std::sscanf(text.c_str(), "%d,%d,%d%c", &x, &y, &z, &tail) != 3 || x < 1 || y < 1 || z < 1 || x > 200 ||
+      y > 200 || z > 200) {
+    throw InputError(std::string(option) + " expects three divisions NX,NY,NZ in 1..200, got '" + text + "'");
+  }
+  return {x, y, z};
+}
 
 constexpr const char* kDescription =
     R"(Forces along device paths that leave the scene's scripted footprint (docs/free-interaction.md): the whole top face at 3 mm depth, presses next to the clamps and at the free end, pushes against end and side faces, below the end and back; benchmarks 1 and 2, the shipped Tet4 tool and a Tet10 tool. Writes DIR/<scene>_<tool>_<path>.csv (one row per 0.1 mm step) and DIR/summary.csv, and prints a summary row per path (convergence, largest step-to-step |dF|/|F|, direction dependence, monotonic presses); scripts/plot_free_interaction.py draws them. Prints numbers, never asserts.)";
@@ -155,9 +168,14 @@ bool Parse(int argc, char** argv, Options* o) {
   bool no_tet10 = false;
   command.AddFlag("--no-tet10", &no_tet10, "only the shipped Tet4 tool", "Run");
   command.AddFlag("--reference", &o->reference,
-                  "also a refined reference (obstacle 30x6x6 Tet10, tool 6x6x3 Tet10, global Uzawa, per-contact "
-                  "rho, 1e-8 m; ~1 GB) on the top-face sweep and the presses, and each model's |F| error against it",
+                  "also a refined reference (obstacle 30x6x6 Tet10, tool 6x6x3 Tet10 unless set below, global "
+                  "Uzawa, per-contact rho, 1e-8 m; ~1 GB) on the top-face sweep and the presses, and each model's "
+                  "|F| error against it",
                   "Run");
+  command.AddText("--reference-obstacle", &o->reference_obstacle, "NX,NY,NZ",
+                  "the reference's obstacle divisions, Tet10 (default 30,6,6; 40,8,8 checks that one)", "Run");
+  command.AddText("--reference-tool", &o->reference_tool, "NX,NY,NZ",
+                  "the reference's tool divisions, Tet10 (default 6,6,3)", "Run");
   command.AddText("--output", &o->out_dir, "DIR",
                   "directory for the per-path CSVs and summary.csv, created if missing (default ./free-interaction)",
                   hapco::cli::kGroupOutput);
@@ -171,6 +189,8 @@ int Run(const Options& options) {
   const std::string& out_dir = options.out_dir;
   const bool with_tet10 = options.with_tet10;
   const bool reference = options.reference;
+  const Eigen::Vector3i reference_obstacle = Divisions(options.reference_obstacle, "--reference-obstacle");
+  const Eigen::Vector3i reference_tool = Divisions(options.reference_tool, "--reference-tool");
   std::filesystem::create_directories(out_dir);
   std::printf("load average at start: %s\n", LoadAverage().c_str());
   std::FILE* summary_csv = std::fopen((out_dir + "/summary.csv").c_str(), "w");
@@ -224,14 +244,16 @@ int Run(const Options& options) {
     // A tightly converged finer model: each shipped choice's |F| error against it, where the
     // tool stays at least 3 mm from a clamped end (closer, the clamp is a stiffness singularity
     // that no mesh here resolves: docs/free-interaction.md).
-    std::printf("\nagainst the refined reference (obstacle 30x6x6 Tet10, tool 6x6x3 Tet10, 1e-8 m), "
-                "presses: |F| > 10 %% of their peak; sweeps: |F| > 0.5 N, tool >= 3 mm from a clamped end:\n");
+    std::printf("\nagainst the refined reference (obstacle %dx%dx%d Tet10, tool %dx%dx%d Tet10, 1e-8 m), "
+                "presses: |F| > 10 %% of their peak; sweeps: |F| > 0.5 N, tool >= 3 mm from a clamped end:\n",
+                reference_obstacle.x(), reference_obstacle.y(), reference_obstacle.z(), reference_tool.x(),
+                reference_tool.y(), reference_tool.z());
     std::printf("%-10s %-14s %-6s %12s %12s %12s %12s\n", "scene", "path", "model", "max |F| err", "p90 err", "median err",
                 "ref peak N");
     for (const char* scene_name : {"benchmark1", "benchmark2"}) {
       sim::SceneSpec scene = io::LoadSceneFile(std::string(HAPCO_SOURCE_DIR) + "/proto/scenes/" + scene_name + ".txtpb");
-      scene.obstacle.box.divisions = Eigen::Vector3i(30, 6, 6);
-      scene.tool.box.divisions = Eigen::Vector3i(6, 6, 3);
+      scene.obstacle.box.divisions = reference_obstacle;
+      scene.tool.box.divisions = reference_tool;
       scene.tool.box.order = fem::ElementOrder::kTet10;
       // Global Uzawa GS with one rho per contact at 1e-8 m: converged to 1e-5 of the force
       // like the NSGS reference on this mesh, at ~1/100 of its time (NSGS: 1.6 s per step).
