@@ -37,30 +37,26 @@ const SurfaceAhead& SurfaceAheadProbe::Probe(const Eigen::Vector3d& device_trans
   }
   const auto& obstacle_reference = model_.obstacle().mesh().nodes_m;
   double best = reach_m_;
+  // The nearest pair of a pass: `sign` turns its face normal into the direction the contact
+  // pushes the device, `obstacle_point` gives the obstacle's point of the pair.
+  const auto nearest = [&](double sign, const auto& obstacle_point) {
+    for (const ContactPoint& p : points_) {
+      if (!(p.gap_m < best)) continue;
+      best = p.gap_m;
+      result_.found = true;
+      result_.gap_m = std::max(0.0, p.gap_m);
+      result_.normal_device = sign * p.frame.row(0).transpose();
+      result_.point_m = obstacle_point(p);
+    }
+  };
   // Pass 1: a tool node over an obstacle face; the contact pushes the tool along the face
   // normal (towards the tool).
   tool_pass_.Detect(obstacle_reference, tool_positions_m_, parameters_, &points_);
-  for (const ContactPoint& p : points_) {
-    if (p.gap_m < best) {
-      best = p.gap_m;
-      result_.found = true;
-      result_.gap_m = std::max(0.0, p.gap_m);
-      result_.normal_device = p.frame.row(0).transpose();
-      result_.point_m = p.obstacle_point_m;
-    }
-  }
+  nearest(1.0, [](const ContactPoint& p) -> Eigen::Vector3d { return p.obstacle_point_m; });
   // Pass 2: an obstacle edge node over a tool face; the contact pushes the tool against that
   // face's normal.
   edge_pass_.Detect(tool_positions_m_, obstacle_reference, parameters_, &points_);
-  for (const ContactPoint& p : points_) {
-    if (p.gap_m < best) {
-      best = p.gap_m;
-      result_.found = true;
-      result_.gap_m = std::max(0.0, p.gap_m);
-      result_.normal_device = -p.frame.row(0).transpose();
-      result_.point_m = obstacle_reference.row(p.tool_node).transpose();
-    }
-  }
+  nearest(-1.0, [&](const ContactPoint& p) -> Eigen::Vector3d { return obstacle_reference.row(p.tool_node).transpose(); });
   return result_;
 }
 

@@ -25,7 +25,7 @@ struct SurfaceAhead {
   bool found = false;                                       // a pair within reach
   double gap_m = 0.0;                                       // gap₀ >= 0 at the pose, m
   Eigen::Vector3d normal_device = Eigen::Vector3d::Zero();  // unit: a contact there pushes the device along it
-  Eigen::Vector3d point_m = Eigen::Vector3d::Zero();        // the master face's point of the pair, m
+  Eigen::Vector3d point_m = Eigen::Vector3d::Zero();        // the obstacle's point of the pair, m
 };
 
 class SurfaceAheadProbe {
