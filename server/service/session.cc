@@ -42,6 +42,8 @@ Session::Session(std::string client_id, const sim::TwoBodyModel& model,
       created_ns_(MonotonicNowNs()),
       frame_(MakeSample<hapco_idl_ContactStateFrame>()) {
   if (time_budget_s >= 0) sim_.parameters.time_budget_s = time_budget_s;
+  // The surface-ahead search's trees are built here, not on the session's first 1 kHz step.
+  if (local_model_ && physics_ == SessionPhysics::kContact) local_model_builder_.Prepare(model);
   SetClientId(force_.client_id, client_id_);
   SetClientId(frame_->client_id, client_id_);
   // The answering server in every force and frame: a client (and a recorder) sees when it

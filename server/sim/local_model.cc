@@ -13,17 +13,20 @@ LocalModelBuilder::LocalModelBuilder(double surface_reach_m) : surface_reach_m_(
   HAPCO_ASSERT(std::isfinite(surface_reach_m) && surface_reach_m >= 0.0, "surface reach must be finite and >= 0");
 }
 
+void LocalModelBuilder::Prepare(const TwoBodyModel& model) {
+  if (surface_reach_m_ <= 0.0 || probe_model_ == &model) return;
+  surface_probe_.emplace(model, surface_reach_m_);
+  probe_model_ = &model;
+  steps_since_surface_search_ = -1;
+}
+
 const LocalContactModel& LocalModelBuilder::Linearize(const TwoBodySession& session) {
   LinearizeContacts(session);
   LocalContactModel& model = model_;
   if (model.normal_device.isZero() && surface_reach_m_ > 0.0 && session.last_output().step > 0) {
     // No contact pushes: nothing is loaded, so the configuration is the probe's
     // (surface_ahead.h).
-    if (probe_model_ != &session.model()) {
-      surface_probe_.emplace(session.model(), surface_reach_m_);
-      probe_model_ = &session.model();
-      steps_since_surface_search_ = -1;
-    }
+    if (probe_model_ != &session.model()) Prepare(session.model());
     const Eigen::Vector3d& d = model.device_translation_m;
     const bool reuse = steps_since_surface_search_ >= 0 && steps_since_surface_search_ < kSurfaceResearchSteps &&
                        (d - last_surface_pose_m_).norm() <= kSurfaceResearchDistanceM;

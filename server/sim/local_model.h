@@ -77,6 +77,10 @@ class LocalModelBuilder {
   static constexpr int kSurfaceResearchSteps = 20;
   explicit LocalModelBuilder(double surface_reach_m = kDefaultSurfaceReachM);
 
+  // Builds the surface-ahead search for `model` now (its trees and buffers), so that a
+  // session's 1 kHz path never does; Linearize builds it on first need otherwise (offline).
+  void Prepare(const TwoBodyModel& model);
+
   const LocalContactModel& Linearize(const TwoBodySession& session);
   const LocalContactModel& model() const { return model_; }
 
