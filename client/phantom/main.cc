@@ -184,10 +184,12 @@ int Run(const Options& o) {
               static_cast<unsigned long long>(s.pose_write_errors), s.server_id.c_str(),
               static_cast<unsigned long long>(s.server_moves));
   if (config.render.mode == phantom::RenderMode::kLocalModel || config.render.passivity) {
-    std::printf("  rendering %s: %llu ticks from a model (%llu models; stiffness capped %llu, extrapolation capped "
-                "%llu ticks, pull prevented %llu, friction cone %llu); passivity dissipated %.4f J on %lld ticks\n",
-                phantom::RenderingName(config.render).c_str(),
-                static_cast<unsigned long long>(s.render.model_ticks), static_cast<unsigned long long>(s.render.models_received),
+    std::printf("  rendering %s: %llu ticks from a contact model, %llu from the surface ahead (%llu models; stiffness "
+                "capped %llu, extrapolation capped %llu ticks, pull prevented %llu, friction cone %llu); passivity "
+                "dissipated %.4f J on %lld ticks\n",
+                phantom::RenderingName(config.render).c_str(), static_cast<unsigned long long>(s.render.model_ticks),
+                static_cast<unsigned long long>(s.render.surface_ticks),
+                static_cast<unsigned long long>(s.render.models_received),
                 static_cast<unsigned long long>(s.render.stiffness_capped),
                 static_cast<unsigned long long>(s.render.extrapolation_capped),
                 static_cast<unsigned long long>(s.render.pull_prevented), static_cast<unsigned long long>(s.render.cone_limited),
