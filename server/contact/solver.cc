@@ -60,6 +60,10 @@ void SolverWorkspace::Reserve(int max_contacts, int /*max_iterations*/) {
     u_.resize(3 * max_contacts);
     r_previous_.resize(3 * max_contacts);
     rho_per_contact_.resize(max_contacts);
+    anderson_df_.resize(3 * max_contacts, SolverParameters::kMaxAndersonDepth);
+    anderson_dg_.resize(3 * max_contacts, SolverParameters::kMaxAndersonDepth);
+    anderson_f_.resize(3 * max_contacts);
+    anderson_g_.resize(3 * max_contacts);
   }
 }
 
@@ -67,6 +71,10 @@ struct SolverInternals {
   static Eigen::VectorXd& U(SolverWorkspace* w) { return w->u_; }
   static Eigen::VectorXd& RPrevious(SolverWorkspace* w) { return w->r_previous_; }
   static Eigen::VectorXd& Rho(SolverWorkspace* w) { return w->rho_per_contact_; }
+  static Eigen::MatrixXd& AndersonDf(SolverWorkspace* w) { return w->anderson_df_; }
+  static Eigen::MatrixXd& AndersonDg(SolverWorkspace* w) { return w->anderson_dg_; }
+  static Eigen::VectorXd& AndersonF(SolverWorkspace* w) { return w->anderson_f_; }
+  static Eigen::VectorXd& AndersonG(SolverWorkspace* w) { return w->anderson_g_; }
 };
 
 namespace {
@@ -83,6 +91,10 @@ void CheckParameters(const SolverParameters& p) {
   }
   if (!(p.rho_scale > 0.0) || !std::isfinite(p.rho_scale)) fail("rho_scale must be finite and > 0");
   if (!(p.divergence_factor > 1.0)) fail("divergence_factor must be > 1");
+  if (p.anderson_depth < 0 || p.anderson_depth > SolverParameters::kMaxAndersonDepth) {
+    fail("anderson_depth must be in 0.." + std::to_string(SolverParameters::kMaxAndersonDepth) + " (0 = off)");
+  }
+  if (p.anderson_start < 1) fail("anderson_start must be >= 1");
 }
 
 // Fc3d error (algorithms.md §4) from r, u = W r + ũ and ũ, without allocating.
@@ -269,6 +281,104 @@ double JacobiSweep(const ContactProblem& problem, const Eigen::Ref<const Eigen::
   return sum;
 }
 
+// Anderson acceleration of the sweep map G (SolverParameters::anderson_depth; Walker & Ni,
+// "Anderson acceleration for fixed-point iterations", SIAM J. Numer. Anal. 49, 2011). With
+// x⁽ᵏ⁾ the sweep's input, G(x⁽ᵏ⁾) its output and f⁽ᵏ⁾ = (G(x⁽ᵏ⁾) − x⁽ᵏ⁾)/ρ (per contact) the
+// stop test's residual, the next input is G(x⁽ᵏ⁾) − ΔG γ with γ = argmin ‖f⁽ᵏ⁾ − ΔF γ‖ over
+// the differences of the last `depth` sweeps. Gauss-Seidel on the Coulomb cones slows down
+// to hundreds of sweeps when many contacts slide on coupled, soft surfaces (an organ under an
+// instrument tip): the residual then shrinks along a few slow directions, which the
+// extrapolation removes. No allocation: the history lives in the workspace.
+class AndersonAcceleration {
+ public:
+  AndersonAcceleration(int depth, Eigen::Ref<Eigen::MatrixXd> df, Eigen::Ref<Eigen::MatrixXd> dg,
+                       Eigen::Ref<Eigen::VectorXd> f_previous, Eigen::Ref<Eigen::VectorXd> g_previous)
+      : depth_(depth), df_(df), dg_(dg), f_previous_(f_previous), g_previous_(g_previous) {}
+
+  // Right after a sweep that started from an extrapolated iterate: if its stop-test value
+  // `error` (m) is larger than the plain sweep's before it, the extrapolation is rejected:
+  // r goes back to that plain sweep's output (projected, in the cones), u = W r + ũ again, and
+  // the history restarts (the safeguard: never worse than the paper's iteration, one sweep
+  // lost). Returns true if it rejected.
+  bool RejectWorse(const ContactProblem& problem, double error, Eigen::VectorXd& r, Eigen::Ref<Eigen::VectorXd> u,
+                   int* restarts) {
+    if (!extrapolated_ || (error <= previous_error_ && std::isfinite(error))) return false;
+    r = g_previous_;
+    u.noalias() = problem.flexibility_m_per_n * r;
+    u += problem.free_displacement_m;
+    extrapolated_ = false;
+    count_ = 0;
+    has_previous_ = false;
+    ++*restarts;
+    return true;
+  }
+
+  // A sweep from an extrapolated iterate met the stop test: that is not enough, since the
+  // extrapolation can land where one sweep barely moves without being near the solution (seen
+  // next to a clamped edge, where 1 um of residual is hundreds of newtons). Returns true if
+  // the stop must wait for a plain sweep from the current output to meet the test too.
+  bool ConfirmBeforeStop() {
+    if (!extrapolated_) return false;
+    confirm_ = true;
+    return true;
+  }
+
+  // After an accepted sweep that moved `input` to `r` with stop-test value `error` (m):
+  // records the sweep and, when there is history, replaces r by the extrapolated next input
+  // and makes u = W r + ũ again. Returns true if it extrapolated.
+  bool Apply(const ContactProblem& problem, const Eigen::Ref<const Eigen::VectorXd>& rho,
+             const Eigen::Ref<const Eigen::VectorXd>& input, double error, Eigen::VectorXd& r,
+             Eigen::Ref<Eigen::VectorXd> u) {
+    const Eigen::Index n = r.size();
+    const bool plain_next = confirm_;
+    confirm_ = false;
+    extrapolated_ = false;
+    previous_error_ = error;
+    for (Eigen::Index i = 0; i < n; ++i) {
+      const double f = (r(i) - input(i)) / rho(i / 3);
+      if (has_previous_) {
+        df_(i, next_) = f - f_previous_(i);
+        dg_(i, next_) = r(i) - g_previous_(i);
+      }
+      f_previous_(i) = f;
+      g_previous_(i) = r(i);
+    }
+    if (has_previous_) {
+      next_ = (next_ + 1) % depth_;
+      count_ = std::min(count_ + 1, depth_);
+    }
+    has_previous_ = true;
+    if (count_ == 0 || plain_next) return false;
+    // Normal equations (count × count, at most 8 × 8: no heap), Tikhonov-regularized so that
+    // nearly parallel differences (a stalled direction) cannot blow γ up.
+    using Small = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, SolverParameters::kMaxAndersonDepth,
+                                SolverParameters::kMaxAndersonDepth>;
+    using SmallVector = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, SolverParameters::kMaxAndersonDepth, 1>;
+    const auto df = df_.leftCols(count_);
+    Small normal = df.transpose() * df;
+    const SmallVector rhs = df.transpose() * f_previous_;
+    normal.diagonal().array() += 1e-10 * normal.diagonal().maxCoeff() + std::numeric_limits<double>::min();
+    const SmallVector gamma = normal.ldlt().solve(rhs);
+    if (!gamma.allFinite()) return false;  // r stays the plain sweep's output
+    r.noalias() -= dg_.leftCols(count_) * gamma;
+    u.noalias() = problem.flexibility_m_per_n * r;
+    u += problem.free_displacement_m;
+    extrapolated_ = true;
+    return true;
+  }
+
+ private:
+  int depth_;
+  Eigen::Ref<Eigen::MatrixXd> df_, dg_;
+  Eigen::Ref<Eigen::VectorXd> f_previous_, g_previous_;
+  int count_ = 0;  // columns of df_/dg_ in use
+  int next_ = 0;   // ring position of the next difference
+  bool has_previous_ = false;
+  bool extrapolated_ = false;  // the current sweep input is an extrapolation
+  bool confirm_ = false;       // the next sweep starts from a plain output (ConfirmBeforeStop)
+  double previous_error_ = std::numeric_limits<double>::infinity();
+};
+
 }  // namespace
 
 SolverStatus Solve(SolverKind kind, const ContactProblem& problem,
@@ -297,6 +407,8 @@ SolverStatus Solve(SolverKind kind, const ContactProblem& problem,
   stats.iterations = 0;
   stats.inner_iterations = 0;
   stats.inner_limit_hits = 0;
+  stats.accelerated_iterations = 0;
+  stats.acceleration_restarts = 0;
   stats.paper_error_m = 0.0;
   stats.fc3d_error = 0.0;
   stats.residual_history.clear();  // keeps its capacity
@@ -326,6 +438,12 @@ SolverStatus Solve(SolverKind kind, const ContactProblem& problem,
     u = u_free;
   }
 
+  const bool accelerate = parameters.anderson_depth > 0 && kind != SolverKind::kGlobalUzawaJacobi;
+  AndersonAcceleration anderson(
+      std::max(parameters.anderson_depth, 1),
+      SolverInternals::AndersonDf(workspace).topRows(n), SolverInternals::AndersonDg(workspace).topRows(n),
+      SolverInternals::AndersonF(workspace).head(n), SolverInternals::AndersonG(workspace).head(n));
+
   double min_error = std::numeric_limits<double>::infinity();
   const double eps1 = parameters.global_tolerance_m;
   int iteration = 0;
@@ -345,6 +463,14 @@ SolverStatus Solve(SolverKind kind, const ContactProblem& problem,
     }
     ++iteration;
     const double error = std::sqrt(sum);
+    if (accelerate && anderson.RejectWorse(problem, error, r, u, &stats.acceleration_restarts)) {
+      stats.residual_history.push_back(error);  // the rejected sweep still counts
+      if (iteration >= parameters.max_iterations) {
+        stats.status = SolverStatus::kMaxIterations;
+        break;
+      }
+      continue;
+    }
     if (!std::isfinite(error) || !r.allFinite()) {
       // Divergence: go back to the last finite iterate (never return a NaN force).
       r = r_previous;
@@ -360,6 +486,7 @@ SolverStatus Solve(SolverKind kind, const ContactProblem& problem,
       converged = Fc3dFromState(problem.friction_coefficient, r, u, u_free) <
                   parameters.fc3d_tolerance;
     }
+    if (converged && accelerate && anderson.ConfirmBeforeStop()) converged = false;
     if (converged) {
       stats.status = SolverStatus::kConverged;
       break;
@@ -375,6 +502,10 @@ SolverStatus Solve(SolverKind kind, const ContactProblem& problem,
     if (iteration >= parameters.max_iterations) {
       stats.status = SolverStatus::kMaxIterations;
       break;
+    }
+    if (accelerate && iteration >= parameters.anderson_start &&
+        anderson.Apply(problem, rho, r_previous, error, r, u)) {
+      ++stats.accelerated_iterations;
     }
   }
   if (m == 0) stats.status = SolverStatus::kConverged;

@@ -65,6 +65,16 @@ struct SolverParameters {
   double rho_scale = 1.0;
   // Start from result->force_n (must then have size 3m) instead of r⁽⁰⁾ = 0 (algorithms.md §4).
   bool warm_start = false;
+  // Anderson acceleration of the Gauss-Seidel sweeps (not in the paper; Walker & Ni 2011;
+  // docs/stability.md "Anderson acceleration"): from sweep `anderson_start` on, the next iterate is the
+  // combination of the last `anderson_depth` + 1 sweeps' outputs whose residuals r⁽ᵏ⁺¹⁾ − r⁽ᵏ⁾
+  // cancel best (least squares in the stop test's ρ-weighted norm); a growing residual resets
+  // the history. The stop test and the returned force are a plain sweep's (projected, so in the
+  // cones), so the converged forces meet the same ε₁. 0 = off (the paper's iteration).
+  // Range 0..kMaxAndersonDepth; anderson_start >= 1. Not used by kGlobalUzawaJacobi.
+  int anderson_depth = 0;
+  int anderson_start = 10;
+  static constexpr int kMaxAndersonDepth = 8;
   // Diverged when the outer residual exceeds
   //     divergence_factor × max(min residual so far, ε₁),
   // or any value becomes non-finite. Range > 1, dimensionless.
@@ -83,6 +93,9 @@ struct SolverStats {
   // kLocalUzawa: inner loops stopped by max_inner_iterations before meeting ε₂ (all sweeps).
   // A sweep with such a loop is never declared converged.
   int inner_limit_hits = 0;
+  // Anderson acceleration: sweeps started from an extrapolated iterate, and history resets.
+  int accelerated_iterations = 0;
+  int acceleration_restarts = 0;
   // Always set at exit: the outer test value sqrt(Σ ‖Δr_α‖²/ρ_α²) of the last iteration, m.
   double paper_error_m = 0.0;
   // Always set at exit: Fc3dError of the returned force (dimensionless).
@@ -117,6 +130,11 @@ class SolverWorkspace {
   Eigen::VectorXd u_;                // W r + ũ, 3 m_max
   Eigen::VectorXd r_previous_;       // last accepted (finite) iterate, 3 m_max
   Eigen::VectorXd rho_per_contact_;  // ρ_α, m_max
+  // Anderson acceleration (SolverParameters::anderson_depth): differences of the last sweeps'
+  // ρ-weighted residuals and outputs, 3 m_max × kMaxAndersonDepth each (a ring), and the
+  // previous sweep's residual and output.
+  Eigen::MatrixXd anderson_df_, anderson_dg_;
+  Eigen::VectorXd anderson_f_, anderson_g_;
 };
 
 // Solves the problem with the chosen method; fills *result (forces, displacements, stats)

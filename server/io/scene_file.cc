@@ -407,6 +407,19 @@ class SceneChecker {
       case pb::PER_CONTACT: parameters.rho_rule = contact::RhoRule::kPerContact; break;
       default: Fail("solver", solver, tree, "rho_rule", "must be PAPER_GLOBAL_MIN or PER_CONTACT");
     }
+    if (solver.anderson_depth() > static_cast<uint32_t>(contact::SolverParameters::kMaxAndersonDepth)) {
+      Fail("solver", solver, tree, "anderson_depth",
+           "must be between 0 (off) and " + std::to_string(contact::SolverParameters::kMaxAndersonDepth) + ", got " +
+               std::to_string(solver.anderson_depth()));
+    }
+    parameters.anderson_depth = static_cast<int>(solver.anderson_depth());
+    if (solver.has_anderson_start()) {
+      if (solver.anderson_start() < 1 || solver.anderson_start() > 1000000) {
+        Fail("solver", solver, tree, "anderson_start",
+             "must be between 1 and 1000000 sweeps, got " + std::to_string(solver.anderson_start()));
+      }
+      parameters.anderson_start = static_cast<int>(solver.anderson_start());
+    }
   }
 
   void CheckTrajectory(const pb::Scene& scene, sim::SceneSpec* spec) const {

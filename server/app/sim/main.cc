@@ -44,7 +44,7 @@ struct Options {
   hapco::sim::PoseLimits limits;
   double tolerance_m = 0, friction = -1, rho_scale = 1;
   std::string fclib_dir;
-  int max_iterations = 0, steps = 0, vtk_every = 10, fclib_every = 10;
+  int max_iterations = 0, steps = 0, vtk_every = 10, fclib_every = 10, anderson_depth = -1;
   bool cold = false, quiet = false;
 };
 
@@ -65,6 +65,10 @@ bool Parse(int argc, char** argv, Options* options) {
   command.AddMaxIterations(&options->max_iterations, "the scene's");
   command.AddNumber("--rho-scale", &options->rho_scale, "X",
                     "multiply the paper's rho by X (stability studies; default 1)", "Solver", 0, HUGE_VAL, true);
+  command.AddInteger("--anderson-depth", &options->anderson_depth, "N",
+                     "Anderson acceleration of the solver's sweeps from the last N (0 = off, the paper's "
+                     "iteration; at most 8; default: the scene's solver.anderson_depth)",
+                     "Solver", 0, hapco::contact::SolverParameters::kMaxAndersonDepth);
   command.AddFlag("--cold", &options->cold, "start every step from r = 0 (the paper), not from the last forces",
                   "Solver");
   command.AddChoice("--compliance", &options->compliance, {"precomputed", "full"},
@@ -254,6 +258,7 @@ int Run(const Options& options) {
   if (options.tolerance_m > 0) scene.solver_parameters.global_tolerance_m = options.tolerance_m;
   if (options.max_iterations > 0) scene.solver_parameters.max_iterations = options.max_iterations;
   scene.solver_parameters.rho_scale = options.rho_scale;
+  if (options.anderson_depth >= 0) scene.solver_parameters.anderson_depth = options.anderson_depth;
   if (options.cold) scene.solver_parameters.warm_start = false;
 
   PendingOutput csv_output(options.csv_path, false), record_output(options.output_path, true);
@@ -280,10 +285,15 @@ int Run(const Options& options) {
   }
   hapco::sim::TwoBodySession session(
       model, options.compliance == "full" ? hapco::sim::SolveMode::kFullSolve : hapco::sim::SolveMode::kPrecomputed);
-  std::printf("solver %s, tolerance %.3g m, mu %.3g, %s start, compliance %s\n",
+  char acceleration[64] = "no acceleration";
+  if (session.parameters.anderson_depth > 0) {
+    std::snprintf(acceleration, sizeof acceleration, "Anderson depth %d after %d sweeps",
+                  session.parameters.anderson_depth, session.parameters.anderson_start);
+  }
+  std::printf("solver %s, tolerance %.3g m, mu %.3g, %s start, %s, compliance %s\n",
               std::string(hapco::contact::SolverName(session.solver)).c_str(),
               session.parameters.global_tolerance_m, scene.friction_coefficient,
-              session.parameters.warm_start ? "warm" : "cold", options.compliance.c_str());
+              session.parameters.warm_start ? "warm" : "cold", acceleration, options.compliance.c_str());
   if (csv != nullptr) {
     std::fprintf(csv, "step,phase,dx_m,dy_m,dz_m,fx_n,fy_n,fz_n,device_fx_n,device_fy_n,device_fz_n,"
                       "contacts,separating,sticking,sliding,outer_iterations,inner_iterations,"

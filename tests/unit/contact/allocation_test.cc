@@ -112,6 +112,16 @@ TEST_P(AllocationFreeSolveTest, NoAllocationAfterReserve) {
   params.time_budget_s = 1e-9;
   EXPECT_EQ(CountAllocations([&] { Solve(kind, p, params, &ws, &res); }), 0);
   EXPECT_EQ(res.stats.status, SolverStatus::kTimeBudgetExceeded);
+
+  // Anderson acceleration at its largest depth: its history lives in the workspace.
+  params.time_budget_s = 0.0;
+  params.anderson_depth = SolverParameters::kMaxAndersonDepth;
+  params.anderson_start = 1;
+  EXPECT_EQ(CountAllocations([&] { status = Solve(kind, p, params, &ws, &res); }), 0) << SolverName(kind);
+  EXPECT_EQ(status, SolverStatus::kConverged);
+  if (kind != SolverKind::kGlobalUzawaJacobi) {
+    EXPECT_GT(res.stats.accelerated_iterations, 0);
+  }
 }
 
 INSTANTIATE_TEST_SUITE_P(AllSolvers, AllocationFreeSolveTest,

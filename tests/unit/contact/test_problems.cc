@@ -42,9 +42,9 @@ ContactProblem RandomSpdProblem(int num_contacts, unsigned seed, double coupling
   return p;
 }
 
-ContactProblem FoundationPunchProblem(int num_contacts, double push_m) {
+ContactProblem FoundationPunchProblem(int num_contacts, double push_m, double k_link_n_per_m) {
   const int m = num_contacts;
-  const double k_n = 1000.0, k_t = 600.0, k_link = 400.0;  // N/m
+  const double k_n = 1000.0, k_t = 600.0, k_link = k_link_n_per_m;  // N/m
   Eigen::MatrixXd k = Eigen::MatrixXd::Zero(3 * m, 3 * m);
   for (int a = 0; a < m; ++a) {
     for (int d = 0; d < 3; ++d) {

@@ -18,8 +18,10 @@ ContactProblem RandomSpdProblem(int num_contacts, unsigned seed, double coupling
 // point has a ground spring (k_n normal, k_t tangential) and springs to its neighbours
 // (k_link in every direction), K is tridiagonal per direction and W = K⁻¹. The punch presses
 // with a tilt (one end lifts off) and pushes tangentially with a slowly turning direction,
-// so the chain has separated, sliding and stuck points (partial slip).
-ContactProblem FoundationPunchProblem(int num_contacts, double push_m);
+// so the chain has separated, sliding and stuck points (partial slip). Links much stiffer than
+// the ground (k_link >> 1000 N/m) couple the points strongly, as a soft organ under a stiffer
+// skin: every contact's displacement then depends on all the others' forces.
+ContactProblem FoundationPunchProblem(int num_contacts, double push_m, double k_link_n_per_m = 400.0);
 
 struct NamedProblem {
   std::string name;

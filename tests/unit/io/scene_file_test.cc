@@ -124,6 +124,26 @@ TEST(SceneFileTest, IncompressiblePoissonRatioIsRejected) {
   EXPECT_NE(message.find("(-1, 0.5)"), std::string::npos) << message;
 }
 
+TEST(SceneFileTest, AndersonAccelerationIsReadAndItsRangeChecked) {
+  const sim::SceneSpec scene = LoadSceneFile(kBenchmark1);
+  EXPECT_EQ(scene.solver_parameters.anderson_depth, 5);
+  EXPECT_EQ(scene.solver_parameters.anderson_start, contact::SolverParameters{}.anderson_start);
+  const sim::SceneSpec later = ParseSceneText(
+      Benchmark1With("anderson_depth: 5", "anderson_depth: 3 anderson_start: 40"), "scene.txtpb");
+  EXPECT_EQ(later.solver_parameters.anderson_depth, 3);
+  EXPECT_EQ(later.solver_parameters.anderson_start, 40);
+  const sim::SceneSpec off = ParseSceneText(Benchmark1With("anderson_depth: 5", ""), "scene.txtpb");
+  EXPECT_EQ(off.solver_parameters.anderson_depth, 0) << "absent: the paper's iteration";
+
+  std::string message = ErrorOf(Benchmark1With("anderson_depth: 5", "anderson_depth: 9"));
+  EXPECT_NE(message.find("solver.anderson_depth"), std::string::npos) << message;
+  EXPECT_NE(message.find("between 0 (off) and 8"), std::string::npos) << message;
+  EXPECT_NE(message.find("scene.txtpb:" + std::to_string(LineOf("anderson_depth: 5")) + ":"), std::string::npos)
+      << message;
+  message = ErrorOf(Benchmark1With("anderson_depth: 5", "anderson_depth: 5 anderson_start: 0"));
+  EXPECT_NE(message.find("solver.anderson_start"), std::string::npos) << message;
+}
+
 TEST(SceneFileTest, BodyWithoutDirichletConditionIsRejectedAsSingular) {
   std::string text = Benchmark1With("  clamped_faces: X_MIN\n  clamped_faces: X_MAX\n", "");
   const std::string message = ErrorOf(text);
