@@ -303,6 +303,7 @@ class AndersonAcceleration {
   bool RejectWorse(const ContactProblem& problem, double error, Eigen::VectorXd& r, Eigen::Ref<Eigen::VectorXd> u,
                    int* restarts) {
     if (!extrapolated_ || (error <= previous_error_ && std::isfinite(error))) return false;
+    ++sweeps_since_best_;
     r = g_previous_;
     u.noalias() = problem.flexibility_m_per_n * r;
     u += problem.free_displacement_m;
@@ -323,6 +324,9 @@ class AndersonAcceleration {
     return true;
   }
 
+  // True once the stagnation guard has handed the solve back to plain sweeps.
+  bool stopped() const { return stopped_; }
+
   // After an accepted sweep that moved `input` to `r` with stop-test value `error` (m):
   // records the sweep and, when there is history, replaces r by the extrapolated next input
   // and makes u = W r + ũ again. Returns true if it extrapolated.
@@ -330,6 +334,21 @@ class AndersonAcceleration {
              const Eigen::Ref<const Eigen::VectorXd>& input, double error, Eigen::VectorXd& r,
              Eigen::Ref<Eigen::VectorXd> u) {
     const Eigen::Index n = r.size();
+    // Stagnation guard: on problems with many redundant contacts (rigid grains: W singular)
+    // the extrapolation can creep along directions the residual barely sees while plain sweeps
+    // would still converge (the FCLIB collection's granular problems, docs/stability.md). If
+    // the best residual has not dropped by 1 % in kStallSweeps sweeps, the rest of this solve
+    // is the paper's iteration.
+    if (error < 0.99 * best_error_) {
+      best_error_ = error;
+      sweeps_since_best_ = 0;
+    } else if (++sweeps_since_best_ >= kStallSweeps) {
+      stopped_ = true;
+    }
+    if (stopped_) {
+      extrapolated_ = false;
+      return false;
+    }
     const bool plain_next = confirm_;
     confirm_ = false;
     extrapolated_ = false;
@@ -373,7 +392,11 @@ class AndersonAcceleration {
   Eigen::Ref<Eigen::VectorXd> f_previous_, g_previous_;
   int count_ = 0;  // columns of df_/dg_ in use
   int next_ = 0;   // ring position of the next difference
+  static constexpr int kStallSweeps = 50;
   bool has_previous_ = false;
+  bool stopped_ = false;       // stagnated: plain sweeps for the rest of the solve
+  double best_error_ = std::numeric_limits<double>::infinity();
+  int sweeps_since_best_ = 0;
   bool extrapolated_ = false;  // the current sweep input is an extrapolation
   bool confirm_ = false;       // the next sweep starts from a plain output (ConfirmBeforeStop)
   double previous_error_ = std::numeric_limits<double>::infinity();
@@ -409,6 +432,7 @@ SolverStatus Solve(SolverKind kind, const ContactProblem& problem,
   stats.inner_limit_hits = 0;
   stats.accelerated_iterations = 0;
   stats.acceleration_restarts = 0;
+  stats.acceleration_stalled = false;
   stats.paper_error_m = 0.0;
   stats.fc3d_error = 0.0;
   stats.residual_history.clear();  // keeps its capacity
@@ -510,6 +534,7 @@ SolverStatus Solve(SolverKind kind, const ContactProblem& problem,
   }
   if (m == 0) stats.status = SolverStatus::kConverged;
   stats.iterations = iteration;
+  stats.acceleration_stalled = accelerate && anderson.stopped();
 
   // Exact u for the returned r (removes incremental round-off), then the exit measures.
   Eigen::VectorXd& u_out = result->displacement_m;

@@ -96,6 +96,9 @@ struct SolverStats {
   // Anderson acceleration: sweeps started from an extrapolated iterate, and history resets.
   int accelerated_iterations = 0;
   int acceleration_restarts = 0;
+  // The extrapolation stopped improving the residual (1 % in 50 sweeps) and the solve went on
+  // with plain sweeps.
+  bool acceleration_stalled = false;
   // Always set at exit: the outer test value sqrt(Σ ‖Δr_α‖²/ρ_α²) of the last iteration, m.
   double paper_error_m = 0.0;
   // Always set at exit: Fc3dError of the returned force (dimensionless).

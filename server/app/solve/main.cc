@@ -46,6 +46,7 @@ struct Options {
   std::optional<double> paper_tolerance;
   double local_tolerance = 1e-8;
   int max_iterations = 1000;
+  int anderson_depth = 0;
 };
 
 // Defines the command line (docs/cli.md) and parses it; false: --help/--version answered.
@@ -71,6 +72,10 @@ bool Parse(int argc, char** argv, Options* options) {
                     "inner tolerance of local-uzawa, ||dr_alpha|| / rho < X, same units (default 1e-8)", "Solver", 0,
                     HUGE_VAL, true);
   command.AddMaxIterations(&options->max_iterations, "1000");
+  command.AddInteger("--anderson-depth", &options->anderson_depth, "N",
+                     "Anderson acceleration of the sweeps from the last N (1..8; default 0 = off, the plain "
+                     "sweeps; the shipped scenes use 5: docs/stability.md)",
+                     "Solver", 0, hapco::contact::SolverParameters::kMaxAndersonDepth);
   command.AddOutput(&options->out_path,
                     "write a copy of the problem (matrices in compressed columns) with the solution in its FCLIB "
                     "/solution group: r, u (and v for a global problem); also when not converged");
@@ -97,6 +102,7 @@ contact::SolverParameters ParametersOf(const Options& options) {
   params.global_tolerance_m = options.paper_tolerance.value_or(std::numeric_limits<double>::min());
   params.local_tolerance_m = options.local_tolerance;
   params.max_iterations = options.max_iterations;
+  params.anderson_depth = options.anderson_depth;
   return params;
 }
 
@@ -144,6 +150,11 @@ void PrintSolve(const Options& options, const contact::ContactProblem& judged, c
                 solve.refine_iterations, stats.inner_iterations);
   } else {
     std::printf("iterations    %d outer, %d inner\n", stats.iterations, stats.inner_iterations);
+  }
+  if (options.anderson_depth > 0) {
+    std::printf("acceleration  Anderson depth %d: %d extrapolated sweeps, %d restarts%s\n", options.anderson_depth,
+                stats.accelerated_iterations, stats.acceleration_restarts,
+                stats.acceleration_stalled ? ", stalled (then plain sweeps)" : "");
   }
   std::printf("time          %.6f s\n", stats.seconds);
   std::printf("fc3d error    %.3e\n", contact::Fc3dError(judged, solve.result.force_n));

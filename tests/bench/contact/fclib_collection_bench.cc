@@ -139,7 +139,7 @@ std::vector<double> ParseTolerances(const std::string& text) {
 }
 
 constexpr const char* kDescription =
-    R"(Time to tolerance of HapCo's contact solvers (local-uzawa, global-uzawa-gs, reference) and Siconos Numerics' NSGS and nonsmooth Newton (Alart-Curnier, NSN_AC) on FCLIB files written by other tools; global problems are reduced by the flexibility method (its time reported apart, not counted). One judge for every solver: Siconos' fc3d_compute_error on the file's own W. A solver whose own stop test passes before the judge does is continued, warm-started, at a tenth of its tolerance, until the judge passes or --max-cpu-s is spent. Times are process CPU seconds. Prints one line per run and writes the CSV that scripts/plot_performance_profile.py reads; scripts/contact-collection runs the whole collection. Never asserts on time.)";
+    R"(Time to tolerance of HapCo's contact solvers (local-uzawa, global-uzawa-gs, reference; the last two also with Anderson acceleration, "+anderson") and Siconos Numerics' NSGS and nonsmooth Newton (Alart-Curnier, NSN_AC) on FCLIB files written by other tools; global problems are reduced by the flexibility method (its time reported apart, not counted). One judge for every solver: Siconos' fc3d_compute_error on the file's own W. A solver whose own stop test passes before the judge does is continued, warm-started, at a tenth of its tolerance, until the judge passes or --max-cpu-s is spent. Times are process CPU seconds. Prints one line per run and writes the CSV that scripts/plot_performance_profile.py reads; scripts/contact-collection runs the whole collection. Never asserts on time.)";
 
 constexpr const char* kFooter = "Exit code: 0 when the benchmark ran, 1 on bad input.";
 
@@ -180,8 +180,11 @@ int Run(const Options& options) {
   std::vector<Row> rows;
   std::ofstream csv(csv_path);  // written row by row: a long run keeps what it measured
   csv << "problem,solver,tolerance,seconds,converged,iterations,error\n";
-  const char* solvers[] = {"local-uzawa", "global-uzawa-gs", "reference", "siconos-nsgs", "siconos-nsn-ac"};
-  std::printf("%-44s %5s %6s %-16s %8s %10s %7s %10s\n", "problem", "m", "tol", "solver", "solved", "cpu_s",
+  // "+anderson": the same sweeps with the shipped scenes' Anderson acceleration (depth 5,
+  // docs/stability.md), judged like the others.
+  const char* solvers[] = {"local-uzawa", "global-uzawa-gs", "global-uzawa-gs+anderson", "reference",
+                           "reference+anderson", "siconos-nsgs", "siconos-nsn-ac"};
+  std::printf("%-44s %5s %6s %-24s %8s %10s %7s %10s\n", "problem", "m", "tol", "solver", "solved", "cpu_s",
               "iters", "judge");
   for (const std::string& file : files) {
     const std::string name = std::filesystem::path(file).stem().string();
@@ -226,7 +229,12 @@ int Run(const Options& options) {
             params.time_budget_s = std::max(0.0, max_seconds - row.seconds);
             params.warm_start = attempt > 0;
             if (attempt > 0) result.force_n = r;
-            contact::Solve(contact::ParseSolverKind(solver), stored.num_contacts() > 0 ? stored : problem, params,
+            std::string kind = solver;
+            if (const auto plus = kind.find("+anderson"); plus != std::string::npos) {
+              kind.erase(plus);
+              params.anderson_depth = 5;
+            }
+            contact::Solve(contact::ParseSolverKind(kind), stored.num_contacts() > 0 ? stored : problem, params,
                            &workspace, &result);
             r = result.force_n;
             row.iterations += result.stats.iterations;
@@ -237,7 +245,7 @@ int Run(const Options& options) {
           if (row.converged || row.seconds >= max_seconds || !r.allFinite()) break;
           run_tol /= 10.0;
         }
-        std::printf("%-44s %5d %6.0e %-16s %8s %10.4g %7d %10.3e\n", name.c_str(), m, tol, solver,
+        std::printf("%-44s %5d %6.0e %-24s %8s %10.4g %7d %10.3e\n", name.c_str(), m, tol, solver,
                     row.converged ? "yes" : "no", row.seconds, row.iterations, row.error);
         std::fflush(stdout);
         rows.push_back(row);
