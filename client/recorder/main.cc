@@ -129,6 +129,10 @@ struct ClientState {
   uint64_t missing_steps = 0;   // gaps in the server step counter (frames never received)
   uint64_t from_forces = 0;     // Step records written from a force alone
   uint64_t late_forces = 0;     // forces that arrived after their frame (already recorded)
+  // Per server: the newest server_receive_ns of a frame recorded from it for this client
+  // (a server's monotonic clock: its frames of later steps, in any session, are newer).
+  std::vector<std::pair<std::string, int64_t>> newest_by_server;
+  uint64_t repeated_frames = 0;  // frames not newer than one already recorded: dropped
 };
 
 class Recorder {
@@ -156,10 +160,31 @@ class Recorder {
 
   void OnFrame(const hapco_idl_ContactStateFrame& frame) {
     ClientState& c = clients_[frame.client_id];
+    // A frame this recorder already has, delivered again: a contact-state writer is
+    // transient-local (its newest frames go to every reader that matches it later), so a
+    // reader that loses and regains a writer — discovery on an overloaded host — receives that
+    // writer's last frames a second time, possibly long after, in the middle of another
+    // session (the likely cause of a compose run's poses 77-84 "stepped again at the origin").
+    // Not newer than the newest frame from the same server: dropped and counted, never taken
+    // for a new session. (Server ids are per process: service/server_choice.h.)
+    const std::size_t id_length = strnlen(frame.server_id, sizeof(frame.server_id));
+    int64_t* newest = nullptr;
+    for (auto& [server, ns] : c.newest_by_server) {
+      if (server.compare(0, std::string::npos, frame.server_id, id_length) == 0) newest = &ns;
+    }
+    if (newest != nullptr && frame.server_receive_ns <= *newest) {
+      ++c.repeated_frames;
+      ++repeated_frames_;
+      return;
+    }
+    if (newest == nullptr) {
+      c.newest_by_server.emplace_back(std::string(frame.server_id, id_length), frame.server_receive_ns);
+    } else {
+      *newest = frame.server_receive_ns;
+    }
     // A session starts again when its step counter does (re-opened) or when another server
     // steps the client (it moved after its server stopped answering: docs/several-servers.md).
     // (Compared in place: no string built per frame.)
-    const std::size_t id_length = strnlen(frame.server_id, sizeof(frame.server_id));
     const bool other_server = c.server_id.compare(0, std::string::npos, frame.server_id, id_length) != 0;
     const bool new_session = c.have_frame && (frame.step <= c.last_step || other_server);
     if (other_server) c.server_id.assign(frame.server_id, id_length);
@@ -245,6 +270,7 @@ class Recorder {
   uint64_t forces_seen() const { return forces_seen_; }
   uint64_t status_records() const { return status_records_; }
   uint64_t from_forces() const { return from_forces_; }
+  uint64_t repeated_frames() const { return repeated_frames_; }
   std::size_t clients() const { return clients_.size(); }
   const std::map<std::string, ClientState>& client_states() const { return clients_; }
 
@@ -312,7 +338,7 @@ class Recorder {
   hapco::io::RecordingWriter* writer_;
   hapco::recording::Record record_;  // reused: no allocation per step once warmed up
   std::map<std::string, ClientState> clients_;
-  uint64_t steps_ = 0, missing_steps_ = 0, forces_seen_ = 0, status_records_ = 0, from_forces_ = 0;
+  uint64_t steps_ = 0, missing_steps_ = 0, forces_seen_ = 0, status_records_ = 0, from_forces_ = 0, repeated_frames_ = 0;
 };
 
 hapco::recording::Header MakeHeader(const Options& o) {
@@ -419,12 +445,14 @@ int Run(const Options& o) {
   drain();  // what was received before the stop
   recorder.FlushPending();
   std::printf("hapco-recorder: %llu steps from %zu clients, %llu missing steps, %llu status records, "
-              "%llu forces seen, file %s (%llu steps from forces alone; stopped by %s)\n",
+              "%llu forces seen, file %s (%llu steps from forces alone, %llu frames received again and "
+              "dropped; stopped by %s)\n",
               static_cast<unsigned long long>(recorder.steps()), recorder.clients(),
               static_cast<unsigned long long>(recorder.missing_steps()),
               static_cast<unsigned long long>(recorder.status_records()),
               static_cast<unsigned long long>(recorder.forces_seen()), o.output.c_str(),
               static_cast<unsigned long long>(recorder.from_forces()),
+              static_cast<unsigned long long>(recorder.repeated_frames()),
               stop_signals.ReceivedName("--duration-s"));
   return 0;
 }

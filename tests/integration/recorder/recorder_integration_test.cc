@@ -12,6 +12,8 @@
 #include <vector>
 
 #include "io/recording.h"
+#include "service/qos.h"
+#include "service/topics.h"
 #include "../process_support.h"
 
 namespace hapco::service {
@@ -248,6 +250,70 @@ TEST(RecorderProcess, KilledRecorderLeavesAReadableFile) {
   EXPECT_NE(torn.find("torn tail"), std::string::npos) << torn;
   const std::size_t complete_steps = steps.size() - (report.torn_tail ? 0 : 1);  // the last one is cut
   EXPECT_NE(torn.find("steps      " + std::to_string(complete_steps) + ";"), std::string::npos) << torn;
+}
+
+// (d) Frames delivered a second time are not recorded twice. A contact-state writer is
+// transient-local: a reader that matches it again (discovery lost and regained on an
+// overloaded host) gets its newest frames once more, maybe in the middle of the client's
+// next session (a compose run recorded a client's poses 77-84 "again at the origin"). The
+// test plays the server: session 1 on "srv-a" (steps 1-10), the client moves to "srv-b"
+// (steps 1-5), srv-a's last 8 frames arrive again (the same frames), then a real new session
+// on srv-a (steps 1-3, later receive times). The recording holds each step once, in order.
+TEST(RecorderProcess, FramesDeliveredAgainAreNotRecordedTwice) {
+  const std::string dir = TestDir();
+  const dds_domainid_t domain = SetUpTestDomain();
+  const std::string file = dir + "/again.hapcorec";
+  Process recorder({HAPCO_RECORDER_EXE, kScene, "--output", file, "--domain", std::to_string(domain)},
+                   dir + "/recorder.out", dir + "/recorder.err");
+  std::vector<std::pair<std::string, uint64_t>> expected;  // (server, step) recorded, in order
+  {
+    Participant participant(domain);
+    Topic<hapco_idl_ContactStateFrame> topic(participant);
+    Publisher publisher(participant, ClientPartition("mover-1"));
+    Writer<hapco_idl_ContactStateFrame> writer(publisher, topic, ContactStateQos(64));
+    ASSERT_TRUE(writer.WaitForReaders(1, DDS_SECS(60))) << ReadFile(dir + "/recorder.err");
+    auto frame = MakeSample<hapco_idl_ContactStateFrame>();
+    uint64_t pose = 0;
+    auto write = [&](const char* server, uint64_t step, uint64_t pose_sequence, int64_t receive_ns) {
+      std::snprintf(frame->client_id, sizeof(frame->client_id), "mover-1");
+      std::snprintf(frame->server_id, sizeof(frame->server_id), "%s", server);
+      frame->step = step;
+      frame->pose_sequence = pose_sequence;
+      frame->server_receive_ns = receive_ns;
+      frame->server_send_ns = receive_ns + 1000;
+      frame->device_position_m = {0.0, 0.0, -1e-5 * static_cast<double>(pose_sequence)};
+      ASSERT_EQ(writer.Write(*frame), DDS_RETCODE_OK);
+    };
+    for (uint64_t step = 1; step <= 10; ++step) {
+      write("srv-a", step, ++pose, 1'000'000 * static_cast<int64_t>(step));
+      expected.push_back({"srv-a", step});
+    }
+    for (uint64_t step = 1; step <= 5; ++step) {
+      write("srv-b", step, ++pose, 500'000'000 + 1'000'000 * static_cast<int64_t>(step));
+      expected.push_back({"srv-b", step});
+    }
+    for (uint64_t step = 3; step <= 10; ++step) write("srv-a", step, step, 1'000'000 * static_cast<int64_t>(step));
+    for (uint64_t step = 1; step <= 3; ++step) {
+      write("srv-a", step, ++pose, 900'000'000 + 1'000'000 * static_cast<int64_t>(step));
+      expected.push_back({"srv-a", step});
+    }
+    ASSERT_EQ(writer.WaitForAcks(DDS_SECS(30)), DDS_RETCODE_OK);
+  }
+  recorder.Signal(SIGTERM);
+  ASSERT_EQ(recorder.Wait(30'000), 0) << ReadFile(dir + "/recorder.err");
+  const std::string out = ReadFile(dir + "/recorder.out");
+  EXPECT_NE(out.find("8 frames received again and dropped"), std::string::npos) << out;
+  io::RecordingReadReport report;
+  const std::vector<recording::Step> steps = StepsOf(io::ReadRecording(file, &report));
+  EXPECT_EQ(report.damaged_records, 0);
+  ASSERT_EQ(steps.size(), expected.size()) << out;
+  uint64_t previous_pose = 0;
+  for (std::size_t i = 0; i < steps.size(); ++i) {
+    EXPECT_EQ(steps[i].server_id(), expected[i].first) << "record " << i;
+    EXPECT_EQ(steps[i].step(), expected[i].second) << "record " << i;
+    EXPECT_GT(steps[i].pose_sequence(), previous_pose) << "record " << i << ": a pose recorded again";
+    previous_pose = steps[i].pose_sequence();
+  }
 }
 
 // (c) hapco-report on a recording of two clients: three charts and one CSV row per step.
