@@ -318,6 +318,17 @@ void PhantomClient::Run(const std::atomic<bool>& stop, const std::function<void(
   Eigen::Vector3d previous_position = trajectory[0];
   constexpr int64_t kMoveRetryNs = 100'000'000, kMinMoveIntervalNs = 1'000'000'000;
   int64_t last_move_try_ns = 0, last_move_ns = -kMinMoveIntervalNs;
+  // A server that answers late is not a dead one. On an overloaded host (nine DDS processes
+  // on 2 cores: round trip p99 50 ms) the force timeout fires on live servers, and clients
+  // moved 4-7 times in 8 s, each move restarting the session. So the force still ramps to
+  // zero after the safety timeout, but the client moves only once no force has come for
+  // max(timeout, kMoveRoundTrips x the recent round-trip high), the high decaying with a 2 s
+  // time constant: on an idle network that is the timeout itself (round trips ~1 ms).
+  constexpr double kMoveRoundTrips = 4.0;
+  const double round_trip_decay = std::exp(-tick_s / 2.0);
+  double round_trip_high_ns = 0.0;
+  int64_t last_force_arrival_ns = -1;
+  const auto timeout_ns = static_cast<int64_t>(std::llround(config_.safety.timeout_s * 1e9));
   const int64_t start_ns = MonotonicNowNs();
   int64_t deadline_ns = start_ns + period_ns;
   int drained = 0;
@@ -378,6 +389,7 @@ void PhantomClient::Run(const std::atomic<bool>& stop, const std::function<void(
     bool fresh = false;
     Eigen::Vector3d raw = Eigen::Vector3d::Constant(std::nan(""));
     ReceivedModel model;
+    round_trip_high_ns *= round_trip_decay;
     for (uint32_t tail = arrivals_tail_.load(std::memory_order_relaxed);
          tail != arrivals_head_.load(std::memory_order_acquire); ++tail) {
       const ReceivedForce r = arrivals_[tail % kArrivalCapacity];
@@ -413,6 +425,8 @@ void PhantomClient::Run(const std::atomic<bool>& stop, const std::function<void(
       stats_.render_latency_us.push_back(static_cast<double>(now - r.client_time_ns) * 1e-3);
       if (!r.recovered) stats_.server_time_us.push_back(static_cast<double>(r.server_time_ns) * 1e-3);
       pose.reported_round_trip_ns = r.arrival_ns - r.client_time_ns;
+      round_trip_high_ns = std::max(round_trip_high_ns, static_cast<double>(pose.reported_round_trip_ns));
+      last_force_arrival_ns = r.arrival_ns;
       taken.push_back(r);
     }
     rendered = chain.Tick(fresh, raw, model, position, velocity, now_s);
@@ -443,7 +457,9 @@ void PhantomClient::Run(const std::atomic<bool>& stop, const std::function<void(
     // It starts from the reference configuration at the device's position; the safety filter
     // ramps the force back up. The old server, if only slow, sees the JOIN or a pose
     // addressed elsewhere and closes its session: no client is ever answered by two servers.
-    if (stale && config_.server_id.empty() && now - last_move_try_ns >= kMoveRetryNs &&
+    const double move_after_ns = std::max(static_cast<double>(timeout_ns), kMoveRoundTrips * round_trip_high_ns);
+    const bool server_gone = last_force_arrival_ns < 0 || static_cast<double>(now - last_force_arrival_ns) >= move_after_ns;
+    if (stale && server_gone && config_.server_id.empty() && now - last_move_try_ns >= kMoveRetryNs &&
         now - last_move_ns >= kMinMoveIntervalNs) {
       last_move_try_ns = now;
       const std::string next = ChooseServer(server_id_);
