@@ -13,6 +13,7 @@
 #include "common/error.h"
 #include "common/statistics.h"
 #include "io/recording.h"
+#include "io/recording_sessions.h"
 
 namespace {
 
@@ -78,18 +79,11 @@ int Run(const Options& options) {
   double peak_force_n = 0, peak_device_n = 0;
   long not_converged = 0, contacts[3] = {0, 0, 0};
   std::vector<double> step_times, server_times, round_trips;
-  // Per client, in order of appearance: its sessions (a new one when the step counter starts
-  // again or another server steps it: a restarted server or client, or a client that moved
-  // between servers), steps, steps without contacts.
-  struct Segment {
-    std::string server_id;
-    unsigned long long first = 0, last = 0;
-    long steps = 0;
-  };
+  // Per client, in order of appearance: its sessions (io/recording_sessions.h), steps, steps
+  // without contacts.
   struct ClientSummary {
     long steps = 0, without_contacts = 0;
-    unsigned long long gaps = 0;
-    std::vector<Segment> segments;
+    hapco::io::ClientSessions sessions;
   };
   std::vector<std::string> client_order;
   std::map<std::string, ClientSummary> clients;
@@ -97,15 +91,7 @@ int Run(const Options& options) {
     auto [it, inserted] = clients.try_emplace(step->client_id());
     ClientSummary& c = it->second;
     if (inserted) client_order.push_back(step->client_id());
-    if (c.segments.empty() || step->server_id() != c.segments.back().server_id ||
-        step->step() <= c.segments.back().last) {
-      c.segments.push_back({step->server_id(), step->step(), step->step(), 0});
-    } else if (step->step() > c.segments.back().last + 1) {
-      c.gaps += step->step() - c.segments.back().last - 1;  // steps the server made that are not in the file
-    }
-    Segment& segment = c.segments.back();
-    segment.last = step->step();
-    ++segment.steps;
+    c.sessions.Add(*step);
     ++c.steps;
     if (step->contacts_missing()) ++c.without_contacts;
     if (step->server_time_s() > 0) server_times.push_back(step->server_time_s());
@@ -129,14 +115,16 @@ int Run(const Options& options) {
   for (const auto& id : client_order) {
     const ClientSummary& c = clients[id];
     std::string sessions;
-    for (const Segment& s : c.segments) {
-      sessions += (sessions.empty() ? "" : ", ") + std::to_string(s.first) + ".." + std::to_string(s.last);
+    unsigned long long gaps = 0;  // steps the servers made that are not in the file
+    for (const hapco::io::RecordedSession& s : c.sessions.sessions()) {
+      sessions += (sessions.empty() ? "" : ", ") + std::to_string(s.first_step) + ".." + std::to_string(s.last_step);
       if (!s.server_id.empty()) sessions += " on " + s.server_id;
+      gaps += s.missing;
     }
+    const std::size_t count = c.sessions.sessions().size();
     std::printf("client     %s: %ld steps in %zu session%s (%s), %llu not in the file, %ld without contacts "
                 "(frame lost)\n",
-                id.c_str(), c.steps, c.segments.size(), c.segments.size() == 1 ? "" : "s", sessions.c_str(), c.gaps,
-                c.without_contacts);
+                id.c_str(), c.steps, count, count == 1 ? "" : "s", sessions.c_str(), gaps, c.without_contacts);
   }
   // Offline recordings time every step; online ones carry the server's pose-in -> force-out.
   if (!step_times.empty() && percentile(step_times, 1.0) > 0) {

@@ -1,0 +1,42 @@
+#pragma once
+// A client's sessions in a recording, for hapco-report: which server stepped it, from which
+// step to which, and how many steps of each are in the file.
+//
+// A session is one server's step counter for the client, counted from 1. A new one starts when
+// that server's counter starts again (a restarted client or server, a SESSION_RESET, or the
+// client coming back after a move) or when another server steps the client for the first time.
+// Two things do not start one, both seen in overloaded compose runs (docs/several-servers.md):
+// steps of two servers interleaved in time (poses sent to the old server before a move arrive
+// there late and are stepped there; its session goes on), and steps written from a force whose
+// frame was lost (contacts_missing), whose step number is only the lowest possible and may
+// repeat one already seen (or be repeated by the frame itself when it comes late). What is
+// left: force-only steps numbered from another server's counter (the recorder matches forces
+// to frames per client, not per server) still show as short sessions.
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "recording.pb.h"
+
+namespace hapco::io {
+
+struct RecordedSession {
+  std::string server_id;
+  std::uint64_t first_step = 0, last_step = 0;
+  long steps = 0;             // step records of this session in the file
+  std::uint64_t missing = 0;  // steps of the server's counter between first and last not in the file
+  bool last_force_only = false;  // the record of last_step was written from a force alone
+};
+
+// Accumulates one client's step records in file order.
+class ClientSessions {
+ public:
+  void Add(const recording::Step& step);
+  // In order of their first step in the file.
+  const std::vector<RecordedSession>& sessions() const { return sessions_; }
+
+ private:
+  std::vector<RecordedSession> sessions_;
+};
+
+}  // namespace hapco::io
