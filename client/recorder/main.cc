@@ -18,6 +18,7 @@
 #include <fstream>
 #include <iterator>
 #include <map>
+#include <set>
 #include <memory>
 #include <string>
 
@@ -110,7 +111,7 @@ void Set(hapco::recording::Vec3* out, const hapco_idl_Vec3& v) {
   out->set_z(v.z);
 }
 
-// Matching of forces to frames, per client. The server writes, per step, the force then the
+// Matching of forces to frames, per client and server (Recorder::StateOf). The server writes, per step, the force then the
 // frame, both in step order; frames are reliable (they arrive in order, or not at all when
 // the server's keep-last history dropped them), forces best effort. A force waits in
 // `pending` (arrival order = server order) until the frame with its pose sequence arrives:
@@ -121,17 +122,17 @@ void Set(hapco::recording::Vec3* out, const hapco_idl_Vec3& v) {
 // matching is by equality first, so a restart costs at most force-only records for forces
 // whose frames were lost around it (docs/recorder.md).
 struct ClientState {
+  std::string client_id;
   bool have_frame = false;
-  std::string server_id;        // the server of the last frame: another one starts a new session
   uint64_t last_step = 0, last_frame_sequence = 0;
   std::deque<hapco_idl_FeedbackForce> pending;
   uint64_t steps = 0;           // Step records written for this client
   uint64_t missing_steps = 0;   // gaps in the server step counter (frames never received)
   uint64_t from_forces = 0;     // Step records written from a force alone
   uint64_t late_forces = 0;     // forces that arrived after their frame (already recorded)
-  // Per server: the newest server_receive_ns of a frame recorded from it for this client
-  // (a server's monotonic clock: its frames of later steps, in any session, are newer).
-  std::vector<std::pair<std::string, int64_t>> newest_by_server;
+  // The newest server_receive_ns of a frame recorded in this stream (the server's monotonic
+  // clock: its frames of later steps, in any session, are newer; -1: none yet).
+  int64_t newest_receive_ns = -1;
   uint64_t repeated_frames = 0;  // frames not newer than one already recorded: dropped
 };
 
@@ -143,7 +144,7 @@ class Recorder {
     // A notice that the server ignored a pose answers no step: nothing to record.
     if (force.pose_verdict != hapco_idl_POSE_STEPPED) return;
     ++forces_seen_;
-    ClientState& c = clients_[force.client_id];
+    ClientState& c = StateOf(force.client_id, force.server_id);
     // Arrived after its frame (recorded already): a sequence at most kLateWindow below the
     // last frame's. Further below is a restarted client's new sequence, kept.
     if (c.have_frame && force.pose_sequence <= c.last_frame_sequence &&
@@ -159,35 +160,23 @@ class Recorder {
   }
 
   void OnFrame(const hapco_idl_ContactStateFrame& frame) {
-    ClientState& c = clients_[frame.client_id];
+    ClientState& c = StateOf(frame.client_id, frame.server_id);
     // A frame this recorder already has, delivered again: a contact-state writer is
     // transient-local (its newest frames go to every reader that matches it later), so a
     // reader that loses and regains a writer — discovery on an overloaded host — receives that
     // writer's last frames a second time, possibly long after, in the middle of another
     // session (the likely cause of a compose run's poses 77-84 "stepped again at the origin").
-    // Not newer than the newest frame from the same server: dropped and counted, never taken
-    // for a new session. (Server ids are per process: service/server_choice.h.)
-    const std::size_t id_length = strnlen(frame.server_id, sizeof(frame.server_id));
-    int64_t* newest = nullptr;
-    for (auto& [server, ns] : c.newest_by_server) {
-      if (server.compare(0, std::string::npos, frame.server_id, id_length) == 0) newest = &ns;
-    }
-    if (newest != nullptr && frame.server_receive_ns <= *newest) {
+    // Not newer than the newest frame of this client from the same server: dropped and
+    // counted, never taken for a new session. (Server ids are per process: server_choice.h.)
+    if (c.newest_receive_ns >= 0 && frame.server_receive_ns <= c.newest_receive_ns) {
       ++c.repeated_frames;
       ++repeated_frames_;
       return;
     }
-    if (newest == nullptr) {
-      c.newest_by_server.emplace_back(std::string(frame.server_id, id_length), frame.server_receive_ns);
-    } else {
-      *newest = frame.server_receive_ns;
-    }
-    // A session starts again when its step counter does (re-opened) or when another server
-    // steps the client (it moved after its server stopped answering: docs/several-servers.md).
-    // (Compared in place: no string built per frame.)
-    const bool other_server = c.server_id.compare(0, std::string::npos, frame.server_id, id_length) != 0;
-    const bool new_session = c.have_frame && (frame.step <= c.last_step || other_server);
-    if (other_server) c.server_id.assign(frame.server_id, id_length);
+    c.newest_receive_ns = frame.server_receive_ns;
+    // A session starts again when the server's step counter does (re-opened: a restarted
+    // client, a SESSION_RESET, or the client back after a move). (The state is this server's.)
+    const bool new_session = c.have_frame && frame.step <= c.last_step;
     // Steps without a frame: a gap after the previous frame, or the steps before the first
     // frame of a session (the counter starts at 1; a recorder started mid-session counts the
     // steps it did not see).
@@ -257,9 +246,9 @@ class Recorder {
 
   // At the end: forces still waiting for a frame will not get one.
   void FlushPending() {
-    for (auto& [id, c] : clients_) {
+    for (auto& [key, c] : clients_) {
       for (uint64_t number = c.last_step + 1; !c.pending.empty(); ++number) {
-        WriteForceStep(id, &c, c.pending.front(), number);
+        WriteForceStep(c.client_id, &c, c.pending.front(), number);
         c.pending.pop_front();
       }
     }
@@ -271,8 +260,7 @@ class Recorder {
   uint64_t status_records() const { return status_records_; }
   uint64_t from_forces() const { return from_forces_; }
   uint64_t repeated_frames() const { return repeated_frames_; }
-  std::size_t clients() const { return clients_.size(); }
-  const std::map<std::string, ClientState>& client_states() const { return clients_; }
+  std::size_t clients() const { return client_ids_.size(); }
 
  private:
   void WriteFrameStep(const hapco_idl_ContactStateFrame& f, ClientState* c) {
@@ -337,7 +325,24 @@ class Recorder {
 
   hapco::io::RecordingWriter* writer_;
   hapco::recording::Record record_;  // reused: no allocation per step once warmed up
+  // One state per client and server: a client that moved between servers has one stream of
+  // frames and forces per server, and its forces are matched to frames, and numbered, within
+  // the stream of the server that answered them (docs/several-servers.md).
+  ClientState& StateOf(const char (&client_id)[65], const char (&server_id)[65]) {
+    key_.assign(client_id, strnlen(client_id, sizeof(client_id)));
+    const std::size_t client_length = key_.size();
+    key_ += '\n';  // never part of an id
+    key_.append(server_id, strnlen(server_id, sizeof(server_id)));
+    auto [it, inserted] = clients_.try_emplace(key_);
+    if (inserted) {
+      it->second.client_id = key_.substr(0, client_length);
+      client_ids_.insert(it->second.client_id);
+    }
+    return it->second;
+  }
+  std::string key_;  // reused: no allocation per sample for a known stream
   std::map<std::string, ClientState> clients_;
+  std::set<std::string> client_ids_;
   uint64_t steps_ = 0, missing_steps_ = 0, forces_seen_ = 0, status_records_ = 0, from_forces_ = 0, repeated_frames_ = 0;
 };
 

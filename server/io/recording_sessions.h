@@ -9,9 +9,7 @@
 // steps of two servers interleaved in time (poses sent to the old server before a move arrive
 // there late and are stepped there; its session goes on), and steps written from a force whose
 // frame was lost (contacts_missing), whose step number is only the lowest possible and may
-// repeat one already seen (or be repeated by the frame itself when it comes late). What is
-// left: force-only steps numbered from another server's counter (the recorder matches forces
-// to frames per client, not per server) still show as short sessions.
+// repeat one already seen (or be repeated by the frame itself when it comes late).
 #include <cstdint>
 #include <string>
 #include <vector>
