@@ -126,14 +126,9 @@ struct ClientState {
   bool have_frame = false;
   uint64_t last_step = 0, last_frame_sequence = 0;
   std::deque<hapco_idl_FeedbackForce> pending;
-  uint64_t steps = 0;           // Step records written for this client
-  uint64_t missing_steps = 0;   // gaps in the server step counter (frames never received)
-  uint64_t from_forces = 0;     // Step records written from a force alone
-  uint64_t late_forces = 0;     // forces that arrived after their frame (already recorded)
   // The newest server_receive_ns of a frame recorded in this stream (the server's monotonic
   // clock: its frames of later steps, in any session, are newer; -1: none yet).
   int64_t newest_receive_ns = -1;
-  uint64_t repeated_frames = 0;  // frames not newer than one already recorded: dropped
 };
 
 class Recorder {
@@ -149,12 +144,11 @@ class Recorder {
     // last frame's. Further below is a restarted client's new sequence, kept.
     if (c.have_frame && force.pose_sequence <= c.last_frame_sequence &&
         c.last_frame_sequence - force.pose_sequence < kLateWindow) {
-      ++c.late_forces;
       return;
     }
     c.pending.push_back(force);
     if (c.pending.size() > kMaxPendingForces) {  // frames stopped arriving: write the oldest
-      WriteForceStep(force.client_id, &c, c.pending.front(), c.last_step + 1);
+      WriteForceStep(force.client_id, c.pending.front(), c.last_step + 1);
       c.pending.pop_front();
     }
   }
@@ -169,7 +163,6 @@ class Recorder {
     // Not newer than the newest frame of this client from the same server: dropped and
     // counted, never taken for a new session. (Server ids are per process: server_choice.h.)
     if (c.newest_receive_ns >= 0 && frame.server_receive_ns <= c.newest_receive_ns) {
-      ++c.repeated_frames;
       ++repeated_frames_;
       return;
     }
@@ -182,7 +175,6 @@ class Recorder {
     // steps it did not see).
     const uint64_t previous = (c.have_frame && !new_session) ? c.last_step : 0;
     if (frame.step > previous + 1) {
-      c.missing_steps += frame.step - previous - 1;
       missing_steps_ += frame.step - previous - 1;
     }
     // The forces before this frame's: matched by equality, else those with lower sequences.
@@ -208,14 +200,14 @@ class Recorder {
       } else if (frame.step > before) {
         number = frame.step - before + i;
       }
-      WriteForceStep(frame.client_id, &c, c.pending.front(), number);
+      WriteForceStep(frame.client_id, c.pending.front(), number);
       c.pending.pop_front();
     }
     if (matched) c.pending.pop_front();
     c.have_frame = true;
     c.last_step = frame.step;
     c.last_frame_sequence = frame.pose_sequence;
-    WriteFrameStep(frame, &c);
+    WriteFrameStep(frame);
   }
 
   void OnStatus(const hapco_idl_ServerStatus& s) {
@@ -248,7 +240,7 @@ class Recorder {
   void FlushPending() {
     for (auto& [key, c] : clients_) {
       for (uint64_t number = c.last_step + 1; !c.pending.empty(); ++number) {
-        WriteForceStep(c.client_id, &c, c.pending.front(), number);
+        WriteForceStep(c.client_id, c.pending.front(), number);
         c.pending.pop_front();
       }
     }
@@ -263,7 +255,7 @@ class Recorder {
   std::size_t clients() const { return client_ids_.size(); }
 
  private:
-  void WriteFrameStep(const hapco_idl_ContactStateFrame& f, ClientState* c) {
+  void WriteFrameStep(const hapco_idl_ContactStateFrame& f) {
     hapco::recording::Step* step = record_.mutable_step();
     step->Clear();  // keeps the repeated field's allocated elements for reuse
     step->set_step(f.step);
@@ -295,11 +287,10 @@ class Recorder {
     step->set_pose_sequence(f.pose_sequence);
     step->set_server_time_s(static_cast<double>(f.server_send_ns - f.server_receive_ns) * 1e-9);
     writer_->Append(record_);
-    ++c->steps;
     ++steps_;
   }
 
-  void WriteForceStep(const std::string& client_id, ClientState* c, const hapco_idl_FeedbackForce& f,
+  void WriteForceStep(const std::string& client_id, const hapco_idl_FeedbackForce& f,
                       uint64_t step_number) {
     hapco::recording::Step* step = record_.mutable_step();
     step->Clear();
@@ -317,8 +308,6 @@ class Recorder {
     step->set_server_time_s(static_cast<double>(f.server_send_ns - f.server_receive_ns) * 1e-9);
     step->set_contacts_missing(true);
     writer_->Append(record_);
-    ++c->steps;
-    ++c->from_forces;
     ++steps_;
     ++from_forces_;
   }
