@@ -243,6 +243,13 @@ CLI::Option* CommandLine::AddMaxIterations(int* iterations, const std::string& d
                     "Solver", 1, 1000000);
 }
 
+CLI::Option* CommandLine::AddAndersonDepth(int* depth, const std::string& default_help, int maximum) {
+  return AddInteger("--anderson-depth", depth, "N",
+                    "Anderson acceleration of the solver's sweeps from the last N, 0 = off (the plain sweeps), at "
+                    "most " + std::to_string(maximum) + "; docs/stability.md (default: " + default_help + ")",
+                    "Solver", 0, maximum);
+}
+
 CLI::Option* CommandLine::AddConnectTimeout(double* seconds, const std::string& help) {
   return AddNumber("--connect-timeout-s", seconds, "S", help, kGroupDds, 0, HUGE_VAL, true);
 }

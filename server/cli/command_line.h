@@ -71,6 +71,9 @@ class CommandLine {
   CLI::Option* AddSolver(std::string* name, const std::string& default_help);
   // --max-iter N: outer iterations (sweeps) of the contact solver, 1..1e6 (as a scene file).
   CLI::Option* AddMaxIterations(int* iterations, const std::string& default_help);
+  // --anderson-depth N: Anderson acceleration of the solver's sweeps from the last N, 0 = off
+  // (contact::SolverParameters::anderson_depth; `maximum` is its kMaxAndersonDepth).
+  CLI::Option* AddAndersonDepth(int* depth, const std::string& default_help, int maximum);
   // --connect-timeout-s S: how long to wait for a server (status, clients).
   CLI::Option* AddConnectTimeout(double* seconds, const std::string& help);
   // --force-timeout-ms T: no new force for T ms -> the rendered force ramps to zero.

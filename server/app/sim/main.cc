@@ -65,10 +65,8 @@ bool Parse(int argc, char** argv, Options* options) {
   command.AddMaxIterations(&options->max_iterations, "the scene's");
   command.AddNumber("--rho-scale", &options->rho_scale, "X",
                     "multiply the paper's rho by X (stability studies; default 1)", "Solver", 0, HUGE_VAL, true);
-  command.AddInteger("--anderson-depth", &options->anderson_depth, "N",
-                     "Anderson acceleration of the solver's sweeps from the last N (0 = off, the paper's "
-                     "iteration; at most 8; default: the scene's solver.anderson_depth)",
-                     "Solver", 0, hapco::contact::SolverParameters::kMaxAndersonDepth);
+  command.AddAndersonDepth(&options->anderson_depth, "the scene's solver.anderson_depth",
+                           hapco::contact::SolverParameters::kMaxAndersonDepth);
   command.AddFlag("--cold", &options->cold, "start every step from r = 0 (the paper), not from the last forces",
                   "Solver");
   command.AddChoice("--compliance", &options->compliance, {"precomputed", "full"},

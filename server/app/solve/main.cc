@@ -72,10 +72,8 @@ bool Parse(int argc, char** argv, Options* options) {
                     "inner tolerance of local-uzawa, ||dr_alpha|| / rho < X, same units (default 1e-8)", "Solver", 0,
                     HUGE_VAL, true);
   command.AddMaxIterations(&options->max_iterations, "1000");
-  command.AddInteger("--anderson-depth", &options->anderson_depth, "N",
-                     "Anderson acceleration of the sweeps from the last N (1..8; default 0 = off, the plain "
-                     "sweeps; the shipped scenes use 5: docs/stability.md)",
-                     "Solver", 0, hapco::contact::SolverParameters::kMaxAndersonDepth);
+  command.AddAndersonDepth(&options->anderson_depth, "0; the shipped scenes use 5",
+                           hapco::contact::SolverParameters::kMaxAndersonDepth);
   command.AddOutput(&options->out_path,
                     "write a copy of the problem (matrices in compressed columns) with the solution in its FCLIB "
                     "/solution group: r, u (and v for a global problem); also when not converged");
