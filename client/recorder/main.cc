@@ -126,9 +126,11 @@ struct ClientState {
   bool have_frame = false;
   uint64_t last_step = 0, last_frame_sequence = 0;
   std::deque<hapco_idl_FeedbackForce> pending;
-  // The newest server_receive_ns of a frame recorded in this stream (the server's monotonic
-  // clock: its frames of later steps, in any session, are newer; -1: none yet).
-  int64_t newest_receive_ns = -1;
+  // The newest server_send_ns of a frame recorded in this stream (the server's monotonic
+  // clock, stamped once per step: its frames of later steps, in any session, are strictly
+  // newer; -1: none yet). Not server_receive_ns: poses recovered from a later pose's
+  // history are stepped one after another with that pose's receive time.
+  int64_t newest_send_ns = -1;
 };
 
 class Recorder {
@@ -160,13 +162,14 @@ class Recorder {
     // reader that loses and regains a writer — discovery on an overloaded host — receives that
     // writer's last frames a second time, possibly long after, in the middle of another
     // session (the likely cause of a compose run's poses 77-84 "stepped again at the origin").
-    // Not newer than the newest frame of this client from the same server: dropped and
-    // counted, never taken for a new session. (Server ids are per process: server_choice.h.)
-    if (c.newest_receive_ns >= 0 && frame.server_receive_ns <= c.newest_receive_ns) {
+    // Not newer (sent no later) than the newest frame of this client from the same server:
+    // dropped and counted, never taken for a new session. (Server ids are per process:
+    // server_choice.h.)
+    if (c.newest_send_ns >= 0 && frame.server_send_ns <= c.newest_send_ns) {
       ++repeated_frames_;
       return;
     }
-    c.newest_receive_ns = frame.server_receive_ns;
+    c.newest_send_ns = frame.server_send_ns;
     // A session starts again when the server's step counter does (re-opened: a restarted
     // client, a SESSION_RESET, or the client back after a move). (The state is this server's.)
     const bool new_session = c.have_frame && frame.step <= c.last_step;

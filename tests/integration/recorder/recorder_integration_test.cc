@@ -259,6 +259,9 @@ TEST(RecorderProcess, KilledRecorderLeavesAReadableFile) {
 // test plays the server: session 1 on "srv-a" (steps 1-10), the client moves to "srv-b"
 // (steps 1-5), srv-a's last 8 frames arrive again (the same frames), then a real new session
 // on srv-a (steps 1-3, later receive times). The recording holds each step once, in order.
+// Steps 4-6 of the first session share one receive time, as poses recovered from a later
+// pose's history do (the server steps them one after another with that pose's receive time):
+// they are three steps, not one step and two repeats (CI once lost a step that way).
 TEST(RecorderProcess, FramesDeliveredAgainAreNotRecordedTwice) {
   const std::string dir = TestDir();
   const dds_domainid_t domain = SetUpTestDomain();
@@ -274,25 +277,28 @@ TEST(RecorderProcess, FramesDeliveredAgainAreNotRecordedTwice) {
     ASSERT_TRUE(writer.WaitForReaders(1, DDS_SECS(60))) << ReadFile(dir + "/recorder.err");
     auto frame = MakeSample<hapco_idl_ContactStateFrame>();
     uint64_t pose = 0;
+    // Sent 1000 ns after the receive time plus 100 ns per step (a step's send time is its own).
     auto write = [&](const char* server, uint64_t step, uint64_t pose_sequence, int64_t receive_ns) {
       std::snprintf(frame->client_id, sizeof(frame->client_id), "mover-1");
       std::snprintf(frame->server_id, sizeof(frame->server_id), "%s", server);
       frame->step = step;
       frame->pose_sequence = pose_sequence;
       frame->server_receive_ns = receive_ns;
-      frame->server_send_ns = receive_ns + 1000;
+      frame->server_send_ns = receive_ns + 1000 + 100 * static_cast<int64_t>(step);
       frame->device_position_m = {0.0, 0.0, -1e-5 * static_cast<double>(pose_sequence)};
       ASSERT_EQ(writer.Write(*frame), DDS_RETCODE_OK);
     };
+    // Receive time of srv-a's session-1 step (steps 4-6: one pose carried the other two).
+    auto srv_a_receive_ns = [](uint64_t step) { return 1'000'000 * static_cast<int64_t>(step < 4 || step > 6 ? step : 6); };
     for (uint64_t step = 1; step <= 10; ++step) {
-      write("srv-a", step, ++pose, 1'000'000 * static_cast<int64_t>(step));
+      write("srv-a", step, ++pose, srv_a_receive_ns(step));
       expected.push_back({"srv-a", step});
     }
     for (uint64_t step = 1; step <= 5; ++step) {
       write("srv-b", step, ++pose, 500'000'000 + 1'000'000 * static_cast<int64_t>(step));
       expected.push_back({"srv-b", step});
     }
-    for (uint64_t step = 3; step <= 10; ++step) write("srv-a", step, step, 1'000'000 * static_cast<int64_t>(step));
+    for (uint64_t step = 3; step <= 10; ++step) write("srv-a", step, step, srv_a_receive_ns(step));
     for (uint64_t step = 1; step <= 3; ++step) {
       write("srv-a", step, ++pose, 900'000'000 + 1'000'000 * static_cast<int64_t>(step));
       expected.push_back({"srv-a", step});
