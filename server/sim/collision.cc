@@ -168,6 +168,7 @@ ContactDetector::ContactDetector(std::vector<fem::SurfaceTriangle> obstacle_tria
     edge_sum_m += (b - a).norm() + (c - b).norm() + (a - c).norm();
   }
   tie_tolerance_m_ = kTieRelative * edge_sum_m / (3.0 * n_tri);
+  face_geometry_.resize(static_cast<std::size_t>(n_tri));
 
   for (int id : tool_nodes_) {
     if (id < 0) throw InputError("contact detector: negative tool node id " + std::to_string(id));
@@ -286,6 +287,7 @@ void ContactDetector::Refit(const PointsRef& obstacle_positions_m,
       box.max.setConstant(-std::numeric_limits<double>::infinity());
       continue;
     }
+    UpdateFaceGeometry(obstacle_positions_m, order_[slot]);
     const Eigen::Vector3d a = Row(obstacle_positions_m, tri.corners[0]);
     const Eigen::Vector3d b = Row(obstacle_positions_m, tri.corners[1]);
     const Eigen::Vector3d c = Row(obstacle_positions_m, tri.corners[2]);
@@ -316,31 +318,55 @@ void ContactDetector::Refit(const PointsRef& obstacle_positions_m,
   }
 }
 
+void ContactDetector::UpdateFaceGeometry(const PointsRef& obstacle_positions_m, int triangle) {
+  const auto& tri = triangles_[static_cast<std::size_t>(triangle)];
+  FaceGeometry& g = face_geometry_[static_cast<std::size_t>(triangle)];
+  g.a = Row(obstacle_positions_m, tri.corners[0]);
+  g.ab = Row(obstacle_positions_m, tri.corners[1]) - g.a;
+  g.ac = Row(obstacle_positions_m, tri.corners[2]) - g.a;
+  const Eigen::Vector3d cross = g.ab.cross(g.ac);
+  const double twice_area_m2 = cross.norm();
+  g.valid = twice_area_m2 > 0.0;  // collapsed (or non-finite) face: no normal
+  g.normal = cross / twice_area_m2;
+  // The terms of ProjectionBarycentric that do not depend on the point (same expressions, so
+  // the same bits).
+  g.d00 = g.ab.dot(g.ab);
+  g.d01 = g.ab.dot(g.ac);
+  g.d11 = g.ac.dot(g.ac);
+  g.denom = g.d00 * g.d11 - g.d01 * g.d01;
+}
+
 void ContactDetector::TestTriangle(int triangle, const Eigen::Vector3d& x, int tool_index,
                                    const PointsRef& obstacle_positions_m,
                                    const CollisionParameters& parameters, double max_depth_m,
                                    double edge_tolerance, const Eigen::Vector3d& previous_normal) {
   ++stats_.triangles_tested;
-  const auto& tri = triangles_[static_cast<std::size_t>(triangle)];
-  const Eigen::Vector3d a = Row(obstacle_positions_m, tri.corners[0]);
-  const Eigen::Vector3d b = Row(obstacle_positions_m, tri.corners[1]);
-  const Eigen::Vector3d c = Row(obstacle_positions_m, tri.corners[2]);
-  const Eigen::Vector3d cross = (b - a).cross(c - a);
-  const double twice_area_m2 = cross.norm();
-  if (!(twice_area_m2 > 0.0)) return;  // collapsed (or non-finite) face: no normal
-  const Eigen::Vector3d n = cross / twice_area_m2;
   // Normal compatibility and persistence on the reference normals (small-displacement theory,
   // like the contact frames): a face folded by a large local indentation keeps its identity.
+  // Judged first: it needs no current geometry.
   const Eigen::Vector3d& reference_n = reference_normals_[static_cast<std::size_t>(triangle)];
   if (!tool_normals_.empty() &&
       -reference_n.dot(tool_normals_[static_cast<std::size_t>(tool_index)]) <
           parameters.min_normal_opposition) {
     return;
   }
-  const double gap_m = (x - a).dot(n);
+  const FaceGeometry& g = face_geometry_[static_cast<std::size_t>(triangle)];
+  if (!g.valid) return;
+  const Eigen::Vector3d& n = g.normal;
+  const Eigen::Vector3d ap = x - g.a;
+  const double gap_m = ap.dot(n);
   if (!(gap_m < parameters.activation_gap_m && gap_m >= -max_depth_m)) return;
-  const Eigen::Vector3d projection = ProjectionBarycentric(x, a, b, c);
+  // ProjectionBarycentric(x, a, b, c) from the face's cached terms.
+  const double d20 = ap.dot(g.ab);
+  const double d21 = ap.dot(g.ac);
+  const double v = (g.d11 * d20 - g.d01 * d21) / g.denom;
+  const double w = (g.d00 * d21 - g.d01 * d20) / g.denom;
+  const Eigen::Vector3d projection(1.0 - v - w, v, w);
   if (!(projection.minCoeff() >= -edge_tolerance)) return;
+  const auto& tri = triangles_[static_cast<std::size_t>(triangle)];
+  const Eigen::Vector3d& a = g.a;
+  const Eigen::Vector3d b = Row(obstacle_positions_m, tri.corners[1]);
+  const Eigen::Vector3d c = Row(obstacle_positions_m, tri.corners[2]);
   // Inside (or within the slack of) the face: the closest point is the projection itself, or
   // for a projection just outside an edge the nearest point of that edge.
   const Eigen::Vector3d bary =
@@ -493,6 +519,7 @@ void ContactDetector::DetectBruteForce(const PointsRef& obstacle_positions_m,
   HAPCO_ASSERT(contacts != nullptr, "DetectBruteForce needs an output vector");
   ValidateCall(obstacle_positions_m, tool_positions_m, parameters);
   contacts->clear();
+  for (int t = 0; t < static_cast<int>(triangles_.size()); ++t) UpdateFaceGeometry(obstacle_positions_m, t);
   stats_ = DetectorStats{};
   stats_.triangles_total = static_cast<std::int64_t>(triangles_.size());
   for (std::size_t i = 0; i < tool_nodes_.size(); ++i) {

@@ -165,7 +165,20 @@ class ContactDetector {
     double outside = 0.0;     // how far the projection lies outside the face (barycentric, >= 0)
   };
 
+  // A face's geometry in the current positions, computed once per Detect (Refit): a face is
+  // tested by every tool node near it (about ten per step), and its normal and the dot
+  // products of ProjectionBarycentric were most of each test.
+  struct FaceGeometry {
+    Eigen::Vector3d a = Eigen::Vector3d::Zero();   // corner 0, m
+    Eigen::Vector3d ab = Eigen::Vector3d::Zero();  // corner 1 − corner 0, m
+    Eigen::Vector3d ac = Eigen::Vector3d::Zero();  // corner 2 − corner 0, m
+    Eigen::Vector3d normal = Eigen::Vector3d::Zero();  // unit, outward
+    double d00 = 0.0, d01 = 0.0, d11 = 0.0, denom = 0.0;  // ab·ab, ab·ac, ac·ac, d00 d11 − d01², m², m⁴
+    bool valid = false;  // false: collapsed or non-finite (no normal)
+  };
+
   int BuildNode(const std::vector<Eigen::Vector3d>& centroids, int begin, int end, int depth);
+  void UpdateFaceGeometry(const PointsRef& obstacle_positions_m, int triangle);
   void ValidateCall(const PointsRef& obstacle_positions_m, const PointsRef& tool_positions_m,
                     const CollisionParameters& parameters) const;
   void Refit(const PointsRef& obstacle_positions_m, const CollisionParameters& parameters,
@@ -195,6 +208,7 @@ class ContactDetector {
   // Faces sharing a corner with each face (itself included): CSR offsets and ids.
   std::vector<int> neighbour_offsets_, neighbours_;
   std::vector<Eigen::Vector3d> reference_normals_;  // per face, reference configuration
+  std::vector<FaceGeometry> face_geometry_;         // per face, current positions (Refit)
   DetectorStats stats_;
 };
 
