@@ -169,6 +169,7 @@ ContactDetector::ContactDetector(std::vector<fem::SurfaceTriangle> obstacle_tria
   }
   tie_tolerance_m_ = kTieRelative * edge_sum_m / (3.0 * n_tri);
   face_geometry_.resize(static_cast<std::size_t>(n_tri));
+  face_geometry_call_.assign(static_cast<std::size_t>(n_tri), 0);  // detect_call_ starts at 1
 
   for (int id : tool_nodes_) {
     if (id < 0) throw InputError("contact detector: negative tool node id " + std::to_string(id));
@@ -287,7 +288,6 @@ void ContactDetector::Refit(const PointsRef& obstacle_positions_m,
       box.max.setConstant(-std::numeric_limits<double>::infinity());
       continue;
     }
-    UpdateFaceGeometry(obstacle_positions_m, order_[slot]);
     const Eigen::Vector3d a = Row(obstacle_positions_m, tri.corners[0]);
     const Eigen::Vector3d b = Row(obstacle_positions_m, tri.corners[1]);
     const Eigen::Vector3d c = Row(obstacle_positions_m, tri.corners[2]);
@@ -349,6 +349,10 @@ void ContactDetector::TestTriangle(int triangle, const Eigen::Vector3d& x, int t
       -reference_n.dot(tool_normals_[static_cast<std::size_t>(tool_index)]) <
           parameters.min_normal_opposition) {
     return;
+  }
+  if (face_geometry_call_[static_cast<std::size_t>(triangle)] != detect_call_) {
+    UpdateFaceGeometry(obstacle_positions_m, triangle);
+    face_geometry_call_[static_cast<std::size_t>(triangle)] = detect_call_;
   }
   const FaceGeometry& g = face_geometry_[static_cast<std::size_t>(triangle)];
   if (!g.valid) return;
@@ -460,6 +464,7 @@ void ContactDetector::Detect(const PointsRef& obstacle_positions_m,
   HAPCO_ASSERT(context.triangle_enabled == nullptr || context.triangle_enabled->size() == triangles_.size(),
                "one enabled flag per triangle");
   Refit(obstacle_positions_m, parameters, context.triangle_enabled);
+  ++detect_call_;  // every face's geometry is recomputed on its first test
   contacts->clear();
   stats_ = DetectorStats{};
   stats_.triangles_total = static_cast<std::int64_t>(triangles_.size());
@@ -519,7 +524,7 @@ void ContactDetector::DetectBruteForce(const PointsRef& obstacle_positions_m,
   HAPCO_ASSERT(contacts != nullptr, "DetectBruteForce needs an output vector");
   ValidateCall(obstacle_positions_m, tool_positions_m, parameters);
   contacts->clear();
-  for (int t = 0; t < static_cast<int>(triangles_.size()); ++t) UpdateFaceGeometry(obstacle_positions_m, t);
+  ++detect_call_;  // every face's geometry is recomputed on its first test
   stats_ = DetectorStats{};
   stats_.triangles_total = static_cast<std::int64_t>(triangles_.size());
   for (std::size_t i = 0; i < tool_nodes_.size(); ++i) {

@@ -165,9 +165,9 @@ class ContactDetector {
     double outside = 0.0;     // how far the projection lies outside the face (barycentric, >= 0)
   };
 
-  // A face's geometry in the current positions, computed once per Detect (Refit): a face is
-  // tested by every tool node near it (about ten per step), and its normal and the dot
-  // products of ProjectionBarycentric were most of each test.
+  // A face's geometry in the current positions, computed once per Detect, on the face's first
+  // test: a face is tested by every tool node near it (about ten per step), and its normal and
+  // the dot products of ProjectionBarycentric were most of each test.
   struct FaceGeometry {
     Eigen::Vector3d a = Eigen::Vector3d::Zero();   // corner 0, m
     Eigen::Vector3d ab = Eigen::Vector3d::Zero();  // corner 1 − corner 0, m
@@ -208,7 +208,9 @@ class ContactDetector {
   // Faces sharing a corner with each face (itself included): CSR offsets and ids.
   std::vector<int> neighbour_offsets_, neighbours_;
   std::vector<Eigen::Vector3d> reference_normals_;  // per face, reference configuration
-  std::vector<FaceGeometry> face_geometry_;         // per face, current positions (Refit)
+  std::vector<FaceGeometry> face_geometry_;         // per face, current positions
+  std::vector<std::uint64_t> face_geometry_call_;   // per face: the Detect call it is from
+  std::uint64_t detect_call_ = 0;                   // Detect/DetectBruteForce calls so far
   DetectorStats stats_;
 };
 
