@@ -18,8 +18,8 @@
 #include <fstream>
 #include <iterator>
 #include <map>
-#include <set>
 #include <memory>
+#include <set>
 #include <string>
 
 #include "cli/command_line.h"
@@ -111,9 +111,10 @@ void Set(hapco::recording::Vec3* out, const hapco_idl_Vec3& v) {
   out->set_z(v.z);
 }
 
-// Matching of forces to frames, per client and server (Recorder::StateOf). The server writes, per step, the force then the
-// frame, both in step order; frames are reliable (they arrive in order, or not at all when
-// the server's keep-last history dropped them), forces best effort. A force waits in
+// Matching of forces to frames, per client and server (Recorder::StateOf). The server
+// writes, per step, the force then the frame, both in step order; frames are reliable (they
+// arrive in order, or not at all when the server's keep-last history dropped them), forces
+// best effort. A force waits in
 // `pending` (arrival order = server order) until the frame with its pose sequence arrives:
 // then it is matched (the frame is the record) and every force before it lost its frame for
 // good, so each of those is written as a step of its own (contacts_missing). If a frame's

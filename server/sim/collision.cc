@@ -87,6 +87,16 @@ void CheckParameters(const CollisionParameters& p) {
   }
 }
 
+// Barycentric coordinates of a point's projection into a triangle from the dot products of
+// its edges ab, ac (d00 = ab·ab, d01 = ab·ac, d11 = ac·ac, denom = d00 d11 − d01²) and of the
+// point's offset ap (d20 = ap·ab, d21 = ap·ac): the one formula of ProjectionBarycentric and
+// of the detector's cached faces (FaceGeometry).
+Eigen::Vector3d BarycentricFromDots(double d00, double d01, double d11, double denom, double d20, double d21) {
+  const double v = (d11 * d20 - d01 * d21) / denom;
+  const double w = (d00 * d21 - d01 * d20) / denom;
+  return {1.0 - v - w, v, w};
+}
+
 }  // namespace
 
 Eigen::Vector3d ProjectionBarycentric(const Eigen::Vector3d& p, const Eigen::Vector3d& a,
@@ -99,10 +109,7 @@ Eigen::Vector3d ProjectionBarycentric(const Eigen::Vector3d& p, const Eigen::Vec
   const double d11 = v1.dot(v1);
   const double d20 = v2.dot(v0);
   const double d21 = v2.dot(v1);
-  const double denom = d00 * d11 - d01 * d01;
-  const double v = (d11 * d20 - d01 * d21) / denom;
-  const double w = (d00 * d21 - d01 * d20) / denom;
-  return {1.0 - v - w, v, w};
+  return BarycentricFromDots(d00, d01, d11, d00 * d11 - d01 * d01, d20, d21);
 }
 
 Eigen::Matrix3d FrameFromNormal(const Eigen::Vector3d& n) {
@@ -361,11 +368,7 @@ void ContactDetector::TestTriangle(int triangle, const Eigen::Vector3d& x, int t
   const double gap_m = ap.dot(n);
   if (!(gap_m < parameters.activation_gap_m && gap_m >= -max_depth_m)) return;
   // ProjectionBarycentric(x, a, b, c) from the face's cached terms.
-  const double d20 = ap.dot(g.ab);
-  const double d21 = ap.dot(g.ac);
-  const double v = (g.d11 * d20 - g.d01 * d21) / g.denom;
-  const double w = (g.d00 * d21 - g.d01 * d20) / g.denom;
-  const Eigen::Vector3d projection(1.0 - v - w, v, w);
+  const Eigen::Vector3d projection = BarycentricFromDots(g.d00, g.d01, g.d11, g.denom, ap.dot(g.ab), ap.dot(g.ac));
   if (!(projection.minCoeff() >= -edge_tolerance)) return;
   const auto& tri = triangles_[static_cast<std::size_t>(triangle)];
   const Eigen::Vector3d& a = g.a;
