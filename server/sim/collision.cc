@@ -125,15 +125,52 @@ Eigen::Matrix3d FrameFromNormal(const Eigen::Vector3d& n) {
 }
 
 
+std::array<fem::SurfaceTriangle, 4> FourSubtriangles(const fem::SurfaceTriangle& face) {
+  const auto& c = face.corners;
+  const auto& m = face.midsides;
+  const std::array<int, 3> none{-1, -1, -1};
+  return {fem::SurfaceTriangle{{c[0], m[0], m[2]}, none}, fem::SurfaceTriangle{{c[1], m[1], m[0]}, none},
+          fem::SurfaceTriangle{{c[2], m[2], m[1]}, none}, fem::SurfaceTriangle{{m[0], m[1], m[2]}, none}};
+}
+
+Eigen::Vector3d FaceBarycentricOfSubtriangle(int which, const Eigen::Vector3d& sub_barycentric) {
+  // Face coordinates of each sub-triangle's vertices, as listed in FourSubtriangles.
+  static const double kVertex[4][3][3] = {{{1, 0, 0}, {0.5, 0.5, 0}, {0.5, 0, 0.5}},
+                                          {{0, 1, 0}, {0, 0.5, 0.5}, {0.5, 0.5, 0}},
+                                          {{0, 0, 1}, {0.5, 0, 0.5}, {0, 0.5, 0.5}},
+                                          {{0.5, 0.5, 0}, {0, 0.5, 0.5}, {0.5, 0, 0.5}}};
+  Eigen::Vector3d l = Eigen::Vector3d::Zero();
+  for (int v = 0; v < 3; ++v) {
+    for (int k = 0; k < 3; ++k) l[k] += sub_barycentric[v] * kVertex[which][v][k];
+  }
+  return l;
+}
+
 ContactDetector::ContactDetector(std::vector<fem::SurfaceTriangle> obstacle_triangles,
                                  const PointsRef& obstacle_reference_positions_m,
                                  std::vector<int> tool_nodes,
-                                 std::vector<Eigen::Vector3d> tool_normals)
+                                 std::vector<Eigen::Vector3d> tool_normals,
+                                 std::vector<SubtriangleOfFace> subtriangle_faces)
     : triangles_(std::move(obstacle_triangles)),
+      subtriangle_faces_(std::move(subtriangle_faces)),
       tool_nodes_(std::move(tool_nodes)),
       tool_normals_(std::move(tool_normals)),
       num_obstacle_nodes_(static_cast<int>(obstacle_reference_positions_m.rows())) {
   if (triangles_.empty()) throw InputError("contact detector: no obstacle triangles given");
+  if (!subtriangle_faces_.empty()) {
+    if (subtriangle_faces_.size() != triangles_.size()) {
+      throw InputError("contact detector: " + std::to_string(subtriangle_faces_.size()) + " sub-triangle faces for " +
+                       std::to_string(triangles_.size()) + " triangles");
+    }
+    for (std::size_t t = 0; t < triangles_.size(); ++t) {
+      const SubtriangleOfFace& of = subtriangle_faces_[t];
+      if (of.which < 0 || of.which > 3 || of.face.midsides[0] < 0 ||
+          FourSubtriangles(of.face)[static_cast<std::size_t>(of.which)].corners != triangles_[t].corners) {
+        throw InputError("contact detector: triangle " + std::to_string(t) +
+                         " is not the sub-triangle of the 6-node face given for it");
+      }
+    }
+  }
   if (!obstacle_reference_positions_m.allFinite()) {
     throw InputError("contact detector: non-finite obstacle reference position");
   }
@@ -428,11 +465,19 @@ void ContactDetector::Select(int tool_index, const CollisionParameters& paramete
   contact.barycentric = best->barycentric;
   contact.obstacle_nodes.fill(-1);
   contact.weights.fill(0.0);
-  const Eigen::Vector3d& l = best->barycentric;
-  if (tri.midsides[0] < 0) {
+  // The face whose shape functions carry the point: the triangle itself, or the 6-node face
+  // of a sub-triangle, at the face's parametric coordinates of the point.
+  const fem::SurfaceTriangle* face = &tri;
+  Eigen::Vector3d l = best->barycentric;
+  if (!subtriangle_faces_.empty()) {
+    const SubtriangleOfFace& of = subtriangle_faces_[static_cast<std::size_t>(best->triangle)];
+    face = &of.face;
+    l = FaceBarycentricOfSubtriangle(of.which, l);
+  }
+  if (face->midsides[0] < 0) {
     contact.num_obstacle_nodes = 3;
     for (int k = 0; k < 3; ++k) {
-      contact.obstacle_nodes[static_cast<std::size_t>(k)] = tri.corners[static_cast<std::size_t>(k)];
+      contact.obstacle_nodes[static_cast<std::size_t>(k)] = face->corners[static_cast<std::size_t>(k)];
       contact.weights[static_cast<std::size_t>(k)] = l[k];
     }
   } else {
@@ -442,8 +487,8 @@ void ContactDetector::Select(int tool_index, const CollisionParameters& paramete
     for (int k = 0; k < 3; ++k) {
       const auto corner = static_cast<std::size_t>(k);
       const auto mid = static_cast<std::size_t>(3 + k);
-      contact.obstacle_nodes[corner] = tri.corners[corner];
-      contact.obstacle_nodes[mid] = tri.midsides[corner];
+      contact.obstacle_nodes[corner] = face->corners[corner];
+      contact.obstacle_nodes[mid] = face->midsides[corner];
       contact.weights[corner] = l[k] * (2.0 * l[k] - 1.0);
       contact.weights[mid] = 4.0 * l[k] * l[(k + 1) % 3];
     }

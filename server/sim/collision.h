@@ -10,7 +10,12 @@
 // quadratic 6-node triangle shape functions at the closest point's barycentric coordinates.
 // While a face's midside nodes stay at their edge midpoints (straight edges) the weights
 // reproduce the flat point exactly; on a curved (deformed) Tet10 face the difference is of the
-// order of the face curvature times the squared face size, which we neglect.
+// order of the face curvature times the squared face size. Where that is not negligible (a
+// tool smaller than the faces presses a dimple into one face), the caller searches each 6-node
+// face as its four flat sub-triangles through the midside nodes (FourSubtriangles) and gives
+// the detector each sub-triangle's face: the gap and the closest point then come from the
+// sub-triangle, and the weights stay the face's quadratic ones at the face's parametric point
+// (docs/free-interaction.md, "Quadratic faces").
 //
 // Search cost: an AABB tree over the obstacle triangles is built once (topology) and refitted
 // on every Detect (the obstacle deforms). The refit is linear in the triangles given to the
@@ -28,12 +33,29 @@ namespace hapco::sim {
 
 using PointsRef = Eigen::Ref<const Eigen::Matrix<double, Eigen::Dynamic, 3>>;
 
+// One of the four flat sub-triangles of a 6-node face (corners c, midsides m, m_k on edge
+// (c_k, c_k+1)): which = k < 3 is (c_k, m_k, m_k-1), the one at corner k; which = 3 is
+// (m_0, m_1, m_2). Each has the face's orientation.
+struct SubtriangleOfFace {
+  fem::SurfaceTriangle face;  // the 6-node face
+  int which = 0;              // 0..3
+};
+
+// The four sub-triangles of a 6-node face, in the order of SubtriangleOfFace::which; they
+// carry no midsides (each is searched as a flat 3-node face).
+std::array<fem::SurfaceTriangle, 4> FourSubtriangles(const fem::SurfaceTriangle& face);
+
+// The face's barycentric (parametric) coordinates of the point with barycentric coordinates
+// `sub_barycentric` in its sub-triangle `which` (the map is affine on each sub-triangle).
+Eigen::Vector3d FaceBarycentricOfSubtriangle(int which, const Eigen::Vector3d& sub_barycentric);
+
 // One active contact: a tool node facing a point on an obstacle surface triangle.
 struct ContactPoint {
   int tool_node = -1;          // node id in the tool mesh
   int node_slot = -1;          // position of tool_node in the detector's node list
   int obstacle_triangle = -1;  // index into the detector's obstacle triangle list
-  // Barycentric coordinates of obstacle_point_m in the flat face (corners 0, 1, 2).
+  // Barycentric coordinates of obstacle_point_m in the flat face (corners 0, 1, 2); for a
+  // sub-triangle (SubtriangleOfFace), in the sub-triangle.
   Eigen::Vector3d barycentric = Eigen::Vector3d::Zero();
   // Nodes carrying the obstacle side: 3 corners (Tet4 face) or 3 corners then the midsides on
   // edges (c0,c1) (c1,c2) (c2,c0) (Tet10 face); unused entries are -1 with weight 0.
@@ -110,9 +132,14 @@ class ContactDetector {
   // Throws InputError for an empty triangle list, node ids out of range, a degenerate face,
   // a face with only some midsides, negative tool node ids, or a normal count / length that
   // does not match.
+  // subtriangle_faces: empty, or one per obstacle triangle when the triangles are the
+  // sub-triangles of 6-node faces (FourSubtriangles): a contact then carries that face's six
+  // nodes and quadratic weights. Throws InputError when its size does not match or an entry
+  // is not the sub-triangle it claims to be.
   ContactDetector(std::vector<fem::SurfaceTriangle> obstacle_triangles,
                   const PointsRef& obstacle_reference_positions_m, std::vector<int> tool_nodes,
-                  std::vector<Eigen::Vector3d> tool_normals = {});
+                  std::vector<Eigen::Vector3d> tool_normals = {},
+                  std::vector<SubtriangleOfFace> subtriangle_faces = {});
 
   // Current (deformed) node positions: obstacle N_o x 3, tool N_t x 3 (reference +
   // displacement), m. Only the corner nodes of the given triangles and the candidate tool
@@ -194,6 +221,7 @@ class ContactDetector {
               std::vector<ContactPoint>* contacts) const;
 
   std::vector<fem::SurfaceTriangle> triangles_;
+  std::vector<SubtriangleOfFace> subtriangle_faces_;  // empty, or one per triangle
   std::vector<int> tool_nodes_;
   std::vector<Eigen::Vector3d> tool_normals_;
   int num_obstacle_nodes_ = 0;

@@ -550,6 +550,136 @@ TEST(ContactDetectorTest, DetectIsAllocationFreeOnceWarmedUp) {
   EXPECT_EQ(contacts.size(), s.candidates.size());
 }
 
+// One 6-node face, corners 0-2 and midsides 3 (edge 0-1), 4 (1-2), 5 (2-0), in the plane z = 0
+// with the midsides at their edge midpoints.
+Points SixNodeFace() {
+  const Eigen::Vector3d c0(0.0, 0.0, 0.0), c1(0.012, 0.001, 0.0), c2(0.002, 0.009, 0.0);
+  return ToPoints({c0, c1, c2, (c0 + c1) / 2, (c1 + c2) / 2, (c2 + c0) / 2});
+}
+const fem::SurfaceTriangle kSixNodeFace{{0, 1, 2}, {3, 4, 5}};
+
+std::vector<SubtriangleOfFace> SubtrianglesOf(const fem::SurfaceTriangle& face) {
+  std::vector<SubtriangleOfFace> of;
+  for (int which = 0; which < 4; ++which) of.push_back({face, which});
+  return of;
+}
+
+std::vector<fem::SurfaceTriangle> TrianglesOf(const std::vector<SubtriangleOfFace>& of) {
+  std::vector<fem::SurfaceTriangle> triangles;
+  for (const auto& s : of) triangles.push_back(FourSubtriangles(s.face)[static_cast<std::size_t>(s.which)]);
+  return triangles;
+}
+
+TEST(QuadraticFaceSubtriangles, TileTheFaceAndMapToItsParametricCoordinates) {
+  const Points x = SixNodeFace();
+  const auto parts = FourSubtriangles(kSixNodeFace);
+  const auto row = [&](int node) -> Eigen::Vector3d { return x.row(node).transpose(); };
+  const Eigen::Vector3d face_area = (row(1) - row(0)).cross(row(2) - row(0)) / 2;
+  Eigen::Vector3d area_sum = Eigen::Vector3d::Zero();
+  // The face's parametric coordinates of a point in its plane, solved here directly:
+  // p = l0 c0 + l1 c1 + l2 c2 with l0 = 1 - l1 - l2.
+  Eigen::Matrix<double, 3, 2> edges;
+  edges << row(1) - row(0), row(2) - row(0);
+  const auto parametric = [&](const Eigen::Vector3d& p) -> Eigen::Vector3d {
+    const Eigen::Vector2d l12 = edges.colPivHouseholderQr().solve(p - row(0));
+    return {1.0 - l12.sum(), l12[0], l12[1]};
+  };
+  for (int which = 0; which < 4; ++which) {
+    const auto& tri = parts[static_cast<std::size_t>(which)];
+    EXPECT_EQ(tri.midsides, (std::array<int, 3>{-1, -1, -1}));
+    const Eigen::Vector3d area = (row(tri.corners[1]) - row(tri.corners[0])).cross(row(tri.corners[2]) - row(tri.corners[0])) / 2;
+    EXPECT_NEAR(area.dot(face_area) / face_area.squaredNorm(), 0.25, 1e-12) << "sub-triangle " << which;  // same side, a quarter
+    area_sum += area;
+    for (int v = 0; v < 3; ++v) {
+      const Eigen::Vector3d expected = parametric(row(tri.corners[static_cast<std::size_t>(v)]));
+      EXPECT_LT((FaceBarycentricOfSubtriangle(which, Eigen::Vector3d::Unit(v)) - expected).norm(), 1e-12)
+          << "sub-triangle " << which << " vertex " << v;
+    }
+    // Inside points: the map is affine, so a sub-triangle point maps to its own face coordinates.
+    const Eigen::Vector3d s(0.2, 0.5, 0.3);
+    const Eigen::Vector3d p = s[0] * row(tri.corners[0]) + s[1] * row(tri.corners[1]) + s[2] * row(tri.corners[2]);
+    EXPECT_LT((FaceBarycentricOfSubtriangle(which, s) - parametric(p)).norm(), 1e-12);
+  }
+  EXPECT_LT((area_sum - face_area).norm(), 1e-12 * face_area.norm());
+}
+
+TEST(QuadraticFaceSubtriangles, FlatFaceGivesTheCornerTriangleContact) {
+  // Midsides at their edge midpoints: the sub-triangles lie in the corner triangle, so both
+  // searches find the same point, gap and six weights.
+  const Points x = SixNodeFace();
+  const std::vector<Eigen::Vector3d> q = {{0.004, 0.003, 2e-4}, {0.009, 0.002, -1e-4}, {0.002, 0.007, 1e-4},
+                                          {0.005, 0.004, 3e-5}};
+  const Points tool = ToPoints(q);
+  ContactDetector corners({kSixNodeFace}, x, Iota(tool.rows()));
+  const auto of = SubtrianglesOf(kSixNodeFace);
+  ContactDetector subtriangles(TrianglesOf(of), x, Iota(tool.rows()), {}, of);
+  std::vector<ContactPoint> a, b;
+  corners.Detect(x, tool, CollisionParameters{}, &a);
+  subtriangles.Detect(x, tool, CollisionParameters{}, &b);
+  ASSERT_EQ(a.size(), q.size());
+  ASSERT_EQ(b.size(), q.size());
+  for (std::size_t i = 0; i < q.size(); ++i) {
+    EXPECT_NEAR(a[i].gap_m, b[i].gap_m, 1e-15);
+    EXPECT_LT((a[i].obstacle_point_m - b[i].obstacle_point_m).norm(), 1e-15);
+    ASSERT_EQ(b[i].num_obstacle_nodes, 6);
+    for (int k = 0; k < 6; ++k) {
+      EXPECT_EQ(a[i].obstacle_nodes[static_cast<std::size_t>(k)], b[i].obstacle_nodes[static_cast<std::size_t>(k)]);
+      EXPECT_NEAR(a[i].weights[static_cast<std::size_t>(k)], b[i].weights[static_cast<std::size_t>(k)], 1e-12);
+    }
+    ExpectWellFormed(b[i], x, tool);
+    ExpectWeightsReproducePoint(b[i], x);
+  }
+}
+
+TEST(QuadraticFaceSubtriangles, SeeADimplePressedIntoTheFace) {
+  // The midsides pressed 0.5 mm into the face (a small tool's dimple): the middle sub-triangle
+  // is the plane z = -h. A node 0.1 mm above it is 0.1 mm from the face's surface there, not
+  // 0.4 mm inside the flat triangle of the corners.
+  Points x = SixNodeFace();
+  const double h = 5e-4, g = 1e-4;
+  for (int m = 3; m < 6; ++m) x(m, 2) = -h;
+  const Eigen::Vector3d l(0.4, 0.35, 0.25);  // face coordinates of the node's foot point
+  const Eigen::Vector3d foot = l[0] * x.row(0).transpose() + l[1] * x.row(1).transpose() + l[2] * x.row(2).transpose();
+  const Points tool = ToPoints({Eigen::Vector3d(foot.x(), foot.y(), -h + g)});
+  CollisionParameters parameters;
+  parameters.activation_gap_m = 1e-3;
+  ContactDetector corners({kSixNodeFace}, SixNodeFace(), {0});
+  const auto of = SubtrianglesOf(kSixNodeFace);
+  ContactDetector subtriangles(TrianglesOf(of), SixNodeFace(), {0}, {}, of);
+  std::vector<ContactPoint> a, b;
+  corners.Detect(x, tool, parameters, &a);
+  subtriangles.Detect(x, tool, parameters, &b);
+  ASSERT_EQ(a.size(), 1u);
+  ASSERT_EQ(b.size(), 1u);
+  EXPECT_NEAR(a[0].gap_m, g - h, 1e-15);  // the flat corner triangle
+  EXPECT_NEAR(b[0].gap_m, g, 1e-15);      // the dimple
+  EXPECT_LT((b[0].obstacle_point_m - Eigen::Vector3d(foot.x(), foot.y(), -h)).norm(), 1e-15);
+  ExpectWellFormed(b[0], x, tool);
+  // Quadratic weights at the face coordinates l: they reproduce linear fields, so the weighted
+  // face coordinates of the six nodes give l back.
+  const Eigen::Matrix<double, 6, 3> node_coordinates =
+      (Eigen::Matrix<double, 6, 3>() << 1, 0, 0, 0, 1, 0, 0, 0, 1, 0.5, 0.5, 0, 0, 0.5, 0.5, 0.5, 0, 0.5).finished();
+  Eigen::Vector3d weighted = Eigen::Vector3d::Zero();
+  for (int k = 0; k < 6; ++k) {
+    const int node = b[0].obstacle_nodes[static_cast<std::size_t>(k)];
+    weighted += b[0].weights[static_cast<std::size_t>(k)] * node_coordinates.row(node).transpose();
+  }
+  EXPECT_LT((weighted - l).norm(), 1e-12);
+}
+
+TEST(QuadraticFaceSubtriangles, DetectorRejectsFacesThatDoNotMatch) {
+  const Points x = SixNodeFace();
+  auto of = SubtrianglesOf(kSixNodeFace);
+  const auto triangles = TrianglesOf(of);
+  EXPECT_THROW(ContactDetector(triangles, x, {0}, {}, {of.begin(), of.begin() + 3}), InputError);
+  auto swapped = of;
+  std::swap(swapped[0].which, swapped[1].which);
+  EXPECT_THROW(ContactDetector(triangles, x, {0}, {}, swapped), InputError);
+  auto linear = of;
+  linear[2].face.midsides = {-1, -1, -1};
+  EXPECT_THROW(ContactDetector(triangles, x, {0}, {}, linear), InputError);
+}
+
 TEST(ContactDetectorTest, RejectsBadInput) {
   const fem::Mesh mesh = fem::MakeBoxMesh(ObstacleSpec(fem::ElementOrder::kTet4));
   const auto tris = fem::BoundaryTriangles(mesh);
