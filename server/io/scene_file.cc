@@ -367,6 +367,11 @@ class SceneChecker {
     spec->friction_coefficient = contact.friction_coefficient();
     spec->activation_gap_m = contact.activation_gap_m();
     if (contact.reach_m() > 0.0) spec->reach_m = contact.reach_m();
+    switch (contact.quadratic_face_search()) {
+      case pb::CORNER_TRIANGLE: spec->quadratic_face_subtriangles = false; break;
+      case pb::FOUR_SUBTRIANGLES: spec->quadratic_face_subtriangles = true; break;
+      default: Fail("contact", contact, tree, "quadratic_face_search", "must be CORNER_TRIANGLE or FOUR_SUBTRIANGLES");
+    }
   }
 
   void CheckSolver(const pb::Scene& scene, sim::SceneSpec* spec) const {

@@ -51,6 +51,9 @@ struct SceneSpec {
   // Device workspace radius, m: obstacle faces within this distance of the tool's home box
   // are contact candidates (TwoBodyModel), independent of the trajectory.
   double reach_m = 0.1;
+  // Pair nodes with a 6-node face on its four flat sub-triangles (through the midside nodes)
+  // instead of the flat triangle of its corners (scene.proto QuadraticFaceSearch).
+  bool quadratic_face_subtriangles = false;
   contact::SolverKind solver = contact::SolverKind::kLocalUzawa;
   contact::SolverParameters solver_parameters;
   std::vector<TrajectoryPhase> trajectory;

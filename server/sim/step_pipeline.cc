@@ -64,9 +64,9 @@ TwoBodySession::TwoBodySession(const TwoBodyModel& model, SolveMode mode)
       tool_surface_(model.tool_surface()),
       obstacle_surface_(model.obstacle_surface()),
       tool_pass_(model.obstacle_surface().triangles, model.obstacle().mesh().nodes_m,
-                 model.tool_surface().nodes, model.tool_surface().node_normals),
+                 model.tool_surface().nodes, model.tool_surface().node_normals, model.obstacle_surface().subtriangle_faces),
       edge_pass_(model.tool_surface().triangles, model.tool().mesh().nodes_m, model.obstacle_edge_nodes(),
-                 model.obstacle_edge_normals()) {
+                 model.obstacle_edge_normals(), model.tool_surface().subtriangle_faces) {
   solver = model.scene().solver;
   parameters = model.scene().solver_parameters;
   // A *new* contact deeper than about half a body's thickness would face that body's far
@@ -212,8 +212,9 @@ void TwoBodySession::BroadPhase(const Eigen::Vector3d& increment_m) {
                          ((obstacle_surface_.triangle_max_m[t] + grow).array() >= lo.array()).all();
     obstacle_triangle_enabled_[t] = enabled ? 1 : 0;
     if (!enabled) continue;
-    // The detector reads the corners only (flat faces); midsides of the faces that end up in
-    // contact are added after detection (CompleteContactDisplacements).
+    // The detector reads the searched triangles' corners only (flat faces; with the
+    // FOUR_SUBTRIANGLES search these include the 6-node faces' midsides); the other midsides of
+    // the faces that end up in contact are added after detection (CompleteContactDisplacements).
     for (int node : tri.corners) {
       const int slot = node_index[static_cast<std::size_t>(node)];
       if (!in_region_[static_cast<std::size_t>(slot)]) {

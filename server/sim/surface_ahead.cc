@@ -10,9 +10,9 @@ SurfaceAheadProbe::SurfaceAheadProbe(const TwoBodyModel& model, double reach_m)
     : model_(model),
       reach_m_(reach_m),
       tool_pass_(model.obstacle_surface().triangles, model.obstacle().mesh().nodes_m, model.tool_surface().nodes,
-                 model.tool_surface().node_normals),
+                 model.tool_surface().node_normals, model.obstacle_surface().subtriangle_faces),
       edge_pass_(model.tool_surface().triangles, model.tool().mesh().nodes_m, model.obstacle_edge_nodes(),
-                 model.obstacle_edge_normals()),
+                 model.obstacle_edge_normals(), model.tool_surface().subtriangle_faces),
       tool_positions_m_(model.tool().mesh().nodes_m) {
   if (!(std::isfinite(reach_m) && reach_m > 0.0)) {
     throw InputError("surface-ahead reach must be finite and > 0 m, got " + std::to_string(reach_m));

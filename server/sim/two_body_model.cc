@@ -40,10 +40,21 @@ std::vector<int> FaceNodes(const std::vector<fem::SurfaceTriangle>& faces) {
   return nodes;
 }
 
-// Everything of a ContactSurface except the compliance, from its faces.
-ContactSurface DescribeSurface(const fem::Mesh& mesh, std::vector<fem::SurfaceTriangle> triangles) {
+// Everything of a ContactSurface except the compliance, from its faces; 6-node faces are split
+// into their four sub-triangles when `subtriangles` (scene quadratic_face_search).
+ContactSurface DescribeSurface(const fem::Mesh& mesh, std::vector<fem::SurfaceTriangle> triangles, bool subtriangles) {
   ContactSurface surface;
-  surface.triangles = std::move(triangles);
+  if (subtriangles && !triangles.empty() && triangles.front().midsides[0] >= 0) {
+    for (const fem::SurfaceTriangle& face : triangles) {
+      const auto parts = FourSubtriangles(face);
+      for (int which = 0; which < 4; ++which) {
+        surface.triangles.push_back(parts[static_cast<std::size_t>(which)]);
+        surface.subtriangle_faces.push_back({face, which});
+      }
+    }
+  } else {
+    surface.triangles = std::move(triangles);
+  }
   const auto num_triangles = surface.triangles.size();
   std::vector<Eigen::Vector3d> normals(num_triangles);
   for (std::size_t t = 0; t < num_triangles; ++t) {
@@ -221,8 +232,8 @@ TwoBodyModel::TwoBodyModel(Parts parts, std::size_t max_operator_bytes)
   const fem::Mesh& tool_mesh = tool_.mesh();
   obstacle_thickness_m_ = SmallestExtent(obstacle_mesh);
   tool_thickness_m_ = SmallestExtent(tool_mesh);
-  obstacle_surface_ = DescribeSurface(obstacle_mesh, std::move(parts.obstacle_faces));
-  tool_surface_ = DescribeSurface(tool_mesh, std::move(parts.tool_faces));
+  obstacle_surface_ = DescribeSurface(obstacle_mesh, std::move(parts.obstacle_faces), scene_.quadratic_face_subtriangles);
+  tool_surface_ = DescribeSurface(tool_mesh, std::move(parts.tool_faces), scene_.quadratic_face_subtriangles);
   for (std::size_t i = 0; i < obstacle_surface_.nodes.size(); ++i) {
     if (obstacle_surface_.on_sharp_edge[i]) {
       obstacle_edge_nodes_.push_back(obstacle_surface_.nodes[i]);
@@ -233,7 +244,7 @@ TwoBodyModel::TwoBodyModel(Parts parts, std::size_t max_operator_bytes)
   // A tool that starts inside the obstacle has no meaningful first step: say how deep.
   {
     ContactDetector detector(obstacle_surface_.triangles, obstacle_mesh.nodes_m, tool_surface_.nodes,
-                             tool_surface_.node_normals);
+                             tool_surface_.node_normals, obstacle_surface_.subtriangle_faces);
     CollisionParameters probe;
     probe.activation_gap_m = scene_.reach_m;
     probe.max_penetration_m = 0.45 * obstacle_thickness_m_;

@@ -31,6 +31,10 @@ inline constexpr double kFeatureEdgeAngleRad = 0.5235987755982988;  // 30°
 // A body's candidate contact surface and its operators.
 struct ContactSurface {
   std::vector<fem::SurfaceTriangle> triangles;      // outward right-hand normals
+  // Empty, or (scene quadratic_face_search FOUR_SUBTRIANGLES on a Tet10 body) one per
+  // triangle: `triangles` are then the four flat sub-triangles of each 6-node face, and this
+  // names each one's face (the contact keeps the face's quadratic weights; ContactDetector).
+  std::vector<SubtriangleOfFace> subtriangle_faces;
   // Contact frame (rows n, t1, t2) of each face in the reference configuration.
   // Small-displacement theory: the contact normal is the undeformed face normal, so W, ũ and
   // the force directions stay consistent with the linear model (a frictionless press gives
@@ -47,7 +51,7 @@ struct ContactSurface {
   // Compliance among the surface nodes (3n x 3n, m/N), ordered as `nodes`, stored as one
   // contiguous 3x3 block per node pair for the 1 kHz step (BlockedCompliance).
   BlockedCompliance compliance_m_per_n;
-  double longest_edge_m = 0.0;  // longest face edge, m
+  double longest_edge_m = 0.0;  // longest edge of the searched triangles, m
   // Reference bounding box of each face, m.
   std::vector<Eigen::Vector3d> triangle_min_m, triangle_max_m;
   // Broad-phase bound (rigorous, per axis): the surface's nodes are binned into a grid of

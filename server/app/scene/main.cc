@@ -114,10 +114,16 @@ int Run(const Options& options) {
     const auto dense_bytes = [](const Eigen::MatrixXd& m) { return sizeof(double) * static_cast<std::size_t>(m.size()); };
     std::printf("contact   candidate surfaces (every boundary face within reach_m = %.3g m of the tool):\n",
                 scene.reach_m);
+    // With FOUR_SUBTRIANGLES the surfaces hold four searched sub-triangles per 6-node face.
+    const auto faces = [](const hapco::sim::ContactSurface& s) {
+      return s.subtriangle_faces.empty() ? s.triangles.size() : s.triangles.size() / 4;
+    };
     std::printf("          obstacle %zu faces, %zu nodes (%zu on sharp edges: reverse-pass slaves); "
                 "tool %zu faces, %zu nodes\n",
-                o.triangles.size(), o.nodes.size(), model.obstacle_edge_nodes().size(), t.triangles.size(),
-                t.nodes.size());
+                faces(o), o.nodes.size(), model.obstacle_edge_nodes().size(), faces(t), t.nodes.size());
+    std::printf("          quadratic faces searched on %s (contact.quadratic_face_search)\n",
+                scene.quadratic_face_subtriangles ? "their four sub-triangles through the midside nodes"
+                                                  : "the flat triangle of their corners");
     std::printf("precomputed, %.2f s (compliance %.2f s, batched CHOLMOD solves):\n", watch.ElapsedSeconds(),
                 model.stats().compliance_seconds);
     const auto largest_diagonal = [](const hapco::sim::BlockedCompliance& c) {

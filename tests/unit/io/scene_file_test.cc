@@ -144,6 +144,16 @@ TEST(SceneFileTest, AndersonAccelerationIsReadAndItsRangeChecked) {
   EXPECT_NE(message.find("solver.anderson_start"), std::string::npos) << message;
 }
 
+TEST(SceneFileTest, QuadraticFaceSearchIsReadAndAnUnknownValueNamed) {
+  EXPECT_FALSE(LoadSceneFile(kBenchmark1).quadratic_face_subtriangles) << "default: CORNER_TRIANGLE";
+  const std::string from = "activation_gap_m: 0.0005";
+  EXPECT_TRUE(ParseSceneText(Benchmark1With(from, from + " quadratic_face_search: FOUR_SUBTRIANGLES"), "scene.txtpb")
+                  .quadratic_face_subtriangles);
+  const std::string message = ErrorOf(Benchmark1With(from, from + " quadratic_face_search: 7"));
+  EXPECT_NE(message.find("contact.quadratic_face_search"), std::string::npos) << message;
+  EXPECT_NE(message.find("CORNER_TRIANGLE or FOUR_SUBTRIANGLES"), std::string::npos) << message;
+}
+
 TEST(SceneFileTest, BodyWithoutDirichletConditionIsRejectedAsSingular) {
   std::string text = Benchmark1With("  clamped_faces: X_MIN\n  clamped_faces: X_MAX\n", "");
   const std::string message = ErrorOf(text);

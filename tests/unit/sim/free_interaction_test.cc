@@ -225,6 +225,7 @@ struct RandomPathCase {
   bool clamp_both_ends;
   fem::ElementOrder tool_order;
   int ci_seed;  // the path CI runs: one whose first 600 steps load the bar (12 scanned per case)
+  bool four_subtriangles = false;  // contact.quadratic_face_search FOUR_SUBTRIANGLES (both bodies Tet10)
 };
 
 class RandomPathTest : public ::testing::TestWithParam<RandomPathCase> {};
@@ -251,7 +252,12 @@ std::vector<Eigen::Vector3d> RandomWaypoints(unsigned seed) {
 TEST_P(RandomPathTest, PrecomputedMatchesFullSolves) {
   SceneSpec scene = BarScene(GetParam().clamp_both_ends, fem::ElementOrder::kTet10, {10, 2, 2});
   scene.tool.box.order = GetParam().tool_order;
+  scene.quadratic_face_subtriangles = GetParam().four_subtriangles;
   const TwoBodyModel model(scene);
+  if (GetParam().four_subtriangles) {  // both passes search sub-triangles
+    ASSERT_EQ(model.obstacle_surface().subtriangle_faces.size(), model.obstacle_surface().triangles.size());
+    ASSERT_EQ(model.tool_surface().subtriangle_faces.size(), model.tool_surface().triangles.size());
+  }
   // CI: one path per case, its first 600 steps (3-15 s per case); the study: whole paths.
   int first_seed = GetParam().ci_seed, last_seed = GetParam().ci_seed;
   std::size_t max_steps = 600;
@@ -302,10 +308,12 @@ INSTANTIATE_TEST_SUITE_P(BarsAndTools, RandomPathTest,
                          ::testing::Values(RandomPathCase{true, fem::ElementOrder::kTet10, 5},
                                            RandomPathCase{false, fem::ElementOrder::kTet10, 11},
                                            RandomPathCase{true, fem::ElementOrder::kTet4, 10},
-                                           RandomPathCase{false, fem::ElementOrder::kTet4, 8}),
+                                           RandomPathCase{false, fem::ElementOrder::kTet4, 8},
+                                           RandomPathCase{true, fem::ElementOrder::kTet10, 5, true}),
                          [](const ::testing::TestParamInfo<RandomPathCase>& param_info) {
                            return std::string(param_info.param.clamp_both_ends ? "BothEndsClamped" : "OneEndClamped") +
-                                  (param_info.param.tool_order == fem::ElementOrder::kTet10 ? "Tet10Tool" : "Tet4Tool");
+                                  (param_info.param.tool_order == fem::ElementOrder::kTet10 ? "Tet10Tool" : "Tet4Tool") +
+                                  (param_info.param.four_subtriangles ? "FourSubtriangles" : "");
                          });
 
 // With edge contacts (an obstacle corner pressing into the tool's face) the force on the
