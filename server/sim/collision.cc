@@ -125,23 +125,47 @@ Eigen::Matrix3d FrameFromNormal(const Eigen::Vector3d& n) {
 }
 
 
+namespace {
+
+// The sub-triangles' vertices as nodes of their 6-node face (0-2 corners, 3 + k the midside on
+// edge (k, k+1)), in the order of SubtriangleOfFace::which, and each face node's parametric
+// (barycentric) coordinates: one table for both the split and the map back.
+constexpr int kSubtriangleNodes[4][3] = {{0, 3, 5}, {1, 4, 3}, {2, 5, 4}, {3, 4, 5}};
+constexpr double kFaceNodeCoordinates[6][3] = {{1, 0, 0},     {0, 1, 0},     {0, 0, 1},
+                                               {0.5, 0.5, 0}, {0, 0.5, 0.5}, {0.5, 0, 0.5}};
+
+}  // namespace
+
 std::array<fem::SurfaceTriangle, 4> FourSubtriangles(const fem::SurfaceTriangle& face) {
-  const auto& c = face.corners;
-  const auto& m = face.midsides;
-  const std::array<int, 3> none{-1, -1, -1};
-  return {fem::SurfaceTriangle{{c[0], m[0], m[2]}, none}, fem::SurfaceTriangle{{c[1], m[1], m[0]}, none},
-          fem::SurfaceTriangle{{c[2], m[2], m[1]}, none}, fem::SurfaceTriangle{{m[0], m[1], m[2]}, none}};
+  const auto node = [&face](int k) {
+    return k < 3 ? face.corners[static_cast<std::size_t>(k)] : face.midsides[static_cast<std::size_t>(k - 3)];
+  };
+  std::array<fem::SurfaceTriangle, 4> parts;
+  for (int which = 0; which < 4; ++which) {
+    for (int v = 0; v < 3; ++v) {
+      parts[static_cast<std::size_t>(which)].corners[static_cast<std::size_t>(v)] = node(kSubtriangleNodes[which][v]);
+    }
+    parts[static_cast<std::size_t>(which)].midsides = {-1, -1, -1};
+  }
+  return parts;
+}
+
+SubtriangleSplit SplitIntoSubtriangles(const std::vector<fem::SurfaceTriangle>& faces) {
+  SubtriangleSplit split;
+  for (const fem::SurfaceTriangle& face : faces) {
+    const auto parts = FourSubtriangles(face);
+    for (int which = 0; which < 4; ++which) {
+      split.triangles.push_back(parts[static_cast<std::size_t>(which)]);
+      split.faces.push_back({face, which});
+    }
+  }
+  return split;
 }
 
 Eigen::Vector3d FaceBarycentricOfSubtriangle(int which, const Eigen::Vector3d& sub_barycentric) {
-  // Face coordinates of each sub-triangle's vertices, as listed in FourSubtriangles.
-  static const double kVertex[4][3][3] = {{{1, 0, 0}, {0.5, 0.5, 0}, {0.5, 0, 0.5}},
-                                          {{0, 1, 0}, {0, 0.5, 0.5}, {0.5, 0.5, 0}},
-                                          {{0, 0, 1}, {0.5, 0, 0.5}, {0, 0.5, 0.5}},
-                                          {{0.5, 0.5, 0}, {0, 0.5, 0.5}, {0.5, 0, 0.5}}};
   Eigen::Vector3d l = Eigen::Vector3d::Zero();
   for (int v = 0; v < 3; ++v) {
-    for (int k = 0; k < 3; ++k) l[k] += sub_barycentric[v] * kVertex[which][v][k];
+    for (int k = 0; k < 3; ++k) l[k] += sub_barycentric[v] * kFaceNodeCoordinates[kSubtriangleNodes[which][v]][k];
   }
   return l;
 }

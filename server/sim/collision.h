@@ -45,6 +45,14 @@ struct SubtriangleOfFace {
 // carry no midsides (each is searched as a flat 3-node face).
 std::array<fem::SurfaceTriangle, 4> FourSubtriangles(const fem::SurfaceTriangle& face);
 
+// Every 6-node face as its four sub-triangles, with the face each one belongs to: the
+// triangles and subtriangle_faces a ContactDetector searches.
+struct SubtriangleSplit {
+  std::vector<fem::SurfaceTriangle> triangles;
+  std::vector<SubtriangleOfFace> faces;  // one per triangle
+};
+SubtriangleSplit SplitIntoSubtriangles(const std::vector<fem::SurfaceTriangle>& faces);
+
 // The face's barycentric (parametric) coordinates of the point with barycentric coordinates
 // `sub_barycentric` in its sub-triangle `which` (the map is affine on each sub-triangle).
 Eigen::Vector3d FaceBarycentricOfSubtriangle(int which, const Eigen::Vector3d& sub_barycentric);

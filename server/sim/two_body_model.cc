@@ -45,13 +45,9 @@ std::vector<int> FaceNodes(const std::vector<fem::SurfaceTriangle>& faces) {
 ContactSurface DescribeSurface(const fem::Mesh& mesh, std::vector<fem::SurfaceTriangle> triangles, bool subtriangles) {
   ContactSurface surface;
   if (subtriangles && !triangles.empty() && triangles.front().midsides[0] >= 0) {
-    for (const fem::SurfaceTriangle& face : triangles) {
-      const auto parts = FourSubtriangles(face);
-      for (int which = 0; which < 4; ++which) {
-        surface.triangles.push_back(parts[static_cast<std::size_t>(which)]);
-        surface.subtriangle_faces.push_back({face, which});
-      }
-    }
+    SubtriangleSplit split = SplitIntoSubtriangles(triangles);
+    surface.triangles = std::move(split.triangles);
+    surface.subtriangle_faces = std::move(split.faces);
   } else {
     surface.triangles = std::move(triangles);
   }

@@ -558,18 +558,6 @@ Points SixNodeFace() {
 }
 const fem::SurfaceTriangle kSixNodeFace{{0, 1, 2}, {3, 4, 5}};
 
-std::vector<SubtriangleOfFace> SubtrianglesOf(const fem::SurfaceTriangle& face) {
-  std::vector<SubtriangleOfFace> of;
-  for (int which = 0; which < 4; ++which) of.push_back({face, which});
-  return of;
-}
-
-std::vector<fem::SurfaceTriangle> TrianglesOf(const std::vector<SubtriangleOfFace>& of) {
-  std::vector<fem::SurfaceTriangle> triangles;
-  for (const auto& s : of) triangles.push_back(FourSubtriangles(s.face)[static_cast<std::size_t>(s.which)]);
-  return triangles;
-}
-
 TEST(QuadraticFaceSubtriangles, TileTheFaceAndMapToItsParametricCoordinates) {
   const Points x = SixNodeFace();
   const auto parts = FourSubtriangles(kSixNodeFace);
@@ -611,8 +599,8 @@ TEST(QuadraticFaceSubtriangles, FlatFaceGivesTheCornerTriangleContact) {
                                           {0.005, 0.004, 3e-5}};
   const Points tool = ToPoints(q);
   ContactDetector corners({kSixNodeFace}, x, Iota(tool.rows()));
-  const auto of = SubtrianglesOf(kSixNodeFace);
-  ContactDetector subtriangles(TrianglesOf(of), x, Iota(tool.rows()), {}, of);
+  const SubtriangleSplit split = SplitIntoSubtriangles({kSixNodeFace});
+  ContactDetector subtriangles(split.triangles, x, Iota(tool.rows()), {}, split.faces);
   std::vector<ContactPoint> a, b;
   corners.Detect(x, tool, CollisionParameters{}, &a);
   subtriangles.Detect(x, tool, CollisionParameters{}, &b);
@@ -644,8 +632,8 @@ TEST(QuadraticFaceSubtriangles, SeeADimplePressedIntoTheFace) {
   CollisionParameters parameters;
   parameters.activation_gap_m = 1e-3;
   ContactDetector corners({kSixNodeFace}, SixNodeFace(), {0});
-  const auto of = SubtrianglesOf(kSixNodeFace);
-  ContactDetector subtriangles(TrianglesOf(of), SixNodeFace(), {0}, {}, of);
+  const SubtriangleSplit split = SplitIntoSubtriangles({kSixNodeFace});
+  ContactDetector subtriangles(split.triangles, SixNodeFace(), {0}, {}, split.faces);
   std::vector<ContactPoint> a, b;
   corners.Detect(x, tool, parameters, &a);
   subtriangles.Detect(x, tool, parameters, &b);
@@ -669,8 +657,9 @@ TEST(QuadraticFaceSubtriangles, SeeADimplePressedIntoTheFace) {
 
 TEST(QuadraticFaceSubtriangles, DetectorRejectsFacesThatDoNotMatch) {
   const Points x = SixNodeFace();
-  auto of = SubtrianglesOf(kSixNodeFace);
-  const auto triangles = TrianglesOf(of);
+  const SubtriangleSplit split = SplitIntoSubtriangles({kSixNodeFace});
+  const auto& triangles = split.triangles;
+  const auto& of = split.faces;
   EXPECT_THROW(ContactDetector(triangles, x, {0}, {}, {of.begin(), of.begin() + 3}), InputError);
   auto swapped = of;
   std::swap(swapped[0].which, swapped[1].which);
