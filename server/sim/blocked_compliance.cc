@@ -19,7 +19,9 @@ BlockedCompliance::Storage BlockedCompliance::AllocateZeroed(std::size_t count) 
   // Anonymous pages (zero) on 2 MiB huge pages where the kernel allows it (THP "madvise"
   // mode, the common default): a step reads ~10^4 blocks scattered over ~10^3 small pages of
   // a 100+ MiB C, and with 4 KiB pages their TLB misses were most of the broad phase's time.
-  const std::size_t bytes = std::max<std::size_t>(sizeof(double) * count, 1);
+  // kPaddingDoubles more: a 4-lane load of a block's last 3-vector (compliance_kernels.cc)
+  // reads one double past it, also past the last block.
+  const std::size_t bytes = sizeof(double) * (count + kPaddingDoubles);
   constexpr std::size_t kHuge = std::size_t{2} << 20;
   const std::size_t mapped = (bytes + kHuge - 1) / kHuge * kHuge;
   void* memory = mmap(nullptr, mapped, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);

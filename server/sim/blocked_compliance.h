@@ -50,6 +50,7 @@ class BlockedCompliance {
     return 9 * (static_cast<std::size_t>(j) * static_cast<std::size_t>(nodes_) + static_cast<std::size_t>(i));
   }
   using Storage = std::unique_ptr<double[], CompliancePagesUnmapper>;
+  static constexpr std::size_t kPaddingDoubles = 4;  // zero doubles after the last block
   static Storage AllocateZeroed(std::size_t count);
 
   int nodes_ = 0;

@@ -35,27 +35,6 @@ Eigen::Matrix3d WeightedBlockSum(const Eigen::MatrixXd& compliance, const std::v
   return total;
 }
 
-// The same sum on a blocked C (BlockedCompliance; slots are its nodes), reading each block
-// C(p, q) where it is stored (column q), so the 9 sums stay in registers. (Reading the lower
-// triangle only, C(max, min), and transposing half of the blocks was 1.4x slower: the
-// transposed half needed a second set of sums.) Plain loops over a block's 9 contiguous
-// doubles (Eigen does not vectorise 3x3 fixed-size products).
-Eigen::Matrix3d WeightedBlockSum(const BlockedCompliance& compliance, const std::array<int, 6>& p,
-                                 const std::array<double, 6>& c, int np, const std::array<int, 6>& q,
-                                 const std::array<double, 6>& d, int nq) {
-  double sum[9] = {};  // Σ_kl c_k d_l C(p_k, q_l), column-major
-  for (int k = 0; k < np; ++k) {
-    const int pk = p[static_cast<std::size_t>(k)];
-    const double ck = c[static_cast<std::size_t>(k)];
-    for (int l = 0; l < nq; ++l) {
-      const double w = ck * d[static_cast<std::size_t>(l)];
-      const double* block = compliance.column_data(q[static_cast<std::size_t>(l)]) + 9 * static_cast<std::size_t>(pk);
-      for (int e = 0; e < 9; ++e) sum[e] += w * block[e];
-    }
-  }
-  return Eigen::Map<const Eigen::Matrix3d>(sum);
-}
-
 }  // namespace
 
 TwoBodySession::TwoBodySession(const TwoBodyModel& model, SolveMode mode)
@@ -266,11 +245,8 @@ void TwoBodySession::SlotRuns(const std::vector<int>& slots, std::vector<std::pa
 
 void TwoBodySession::ObstacleDisplacementOnRegion() {
   // U_i = Σ_j C(i, j) f_j for the region slots i, over the loaded slots j. The cost is the
-  // ~10^4 block reads (load-bound, docs/free-interaction.md), so: blocks of one column j are
-  // read in runs of consecutive slots (one stream each, BlockedCompliance), f_j stays in
-  // registers, no branch in the inner loops, and C = Cᵀ serves a block between two loaded
-  // slots for both of them (read once, in the column of the smaller slot).
-  const BlockedCompliance& compliance = obstacle_surface_.compliance_m_per_n;
+  // ~10^4 block reads and their arithmetic (docs/free-interaction.md, docs/performance.md):
+  // see AddComplianceTimesForces for how the blocks are read.
   std::sort(obstacle_loaded_.begin(), obstacle_loaded_.end());
   region_free_.clear();
   for (int slot : region_) {
@@ -279,44 +255,9 @@ void TwoBodySession::ObstacleDisplacementOnRegion() {
   std::sort(region_free_.begin(), region_free_.end());
   SlotRuns(region_free_, &region_runs_);
   SlotRuns(obstacle_loaded_, &loaded_runs_);
-  double* u = obstacle_displacement_m_.data();
-  const double* f = obstacle_slot_force_n_.data();
   for (int i : region_) obstacle_displacement_m_.segment<3>(3 * i).setZero();
-  for (int j : obstacle_loaded_) {
-    const double* column = compliance.column_data(j);
-    const double f0 = f[3 * j], f1 = f[3 * j + 1], f2 = f[3 * j + 2];
-    // Region slots without load: U_i += C(i, j) f_j (column-major block: column r at 3r).
-    for (const auto& [begin, end] : region_runs_) {
-      const double* b = column + 9 * static_cast<std::size_t>(begin);
-      for (int i = begin; i < end; ++i, b += 9) {
-        double* ui = u + 3 * i;
-        ui[0] += b[0] * f0 + b[3] * f1 + b[6] * f2;
-        ui[1] += b[1] * f0 + b[4] * f1 + b[7] * f2;
-        ui[2] += b[2] * f0 + b[5] * f1 + b[8] * f2;
-      }
-    }
-    // Loaded slots i >= j: U_i += C(i, j) f_j and, for i > j, U_j += C(i, j)ᵀ f_i.
-    double uj0 = 0.0, uj1 = 0.0, uj2 = 0.0;
-    for (const auto& [run_begin, end] : loaded_runs_) {
-      if (end <= j) continue;
-      const int begin = std::max(run_begin, j + 1);
-      const double* b = column + 9 * static_cast<std::size_t>(begin);
-      for (int i = begin; i < end; ++i, b += 9) {
-        double* ui = u + 3 * i;
-        const double* fi = f + 3 * i;
-        ui[0] += b[0] * f0 + b[3] * f1 + b[6] * f2;
-        ui[1] += b[1] * f0 + b[4] * f1 + b[7] * f2;
-        ui[2] += b[2] * f0 + b[5] * f1 + b[8] * f2;
-        uj0 += b[0] * fi[0] + b[1] * fi[1] + b[2] * fi[2];
-        uj1 += b[3] * fi[0] + b[4] * fi[1] + b[5] * fi[2];
-        uj2 += b[6] * fi[0] + b[7] * fi[1] + b[8] * fi[2];
-      }
-    }
-    const double* d = column + 9 * static_cast<std::size_t>(j);
-    u[3 * j] += uj0 + d[0] * f0 + d[3] * f1 + d[6] * f2;
-    u[3 * j + 1] += uj1 + d[1] * f0 + d[4] * f1 + d[7] * f2;
-    u[3 * j + 2] += uj2 + d[2] * f0 + d[5] * f1 + d[8] * f2;
-  }
+  AddComplianceTimesForces(compliance_kernel, obstacle_surface_.compliance_m_per_n, region_runs_, obstacle_loaded_,
+                           loaded_runs_, obstacle_slot_force_n_.data(), obstacle_displacement_m_.data());
 }
 
 void TwoBodySession::CompleteContactDisplacements() {
@@ -591,10 +532,10 @@ void TwoBodySession::AssembleProblem(const PairBlocks& pair_blocks) {
 
 void TwoBodySession::AssembleBlocked(const BlockedCompliance& tool, const BlockedCompliance& obstacle) {
   AssembleProblem([&](const StepContact& a, const StepContact& b) -> Eigen::Matrix3d {
-    return WeightedBlockSum(tool, a.tool_slots, a.tool_coefficients, a.num_tool, b.tool_slots, b.tool_coefficients,
-                            b.num_tool) +
-           WeightedBlockSum(obstacle, a.obstacle_slots, a.obstacle_coefficients, a.num_obstacle, b.obstacle_slots,
-                            b.obstacle_coefficients, b.num_obstacle);
+    return WeightedBlockSum(compliance_kernel, tool, a.tool_slots, a.tool_coefficients, a.num_tool, b.tool_slots,
+                            b.tool_coefficients, b.num_tool) +
+           WeightedBlockSum(compliance_kernel, obstacle, a.obstacle_slots, a.obstacle_coefficients, a.num_obstacle,
+                            b.obstacle_slots, b.obstacle_coefficients, b.num_obstacle);
   });
 }
 

@@ -37,6 +37,7 @@
 #include "contact/projection.h"
 #include "contact/solver.h"
 #include "sim/collision.h"
+#include "sim/compliance_kernels.h"
 #include "sim/two_body_model.h"
 
 namespace hapco::sim {
@@ -119,6 +120,8 @@ class TwoBodySession {
   // Solver choice and parameters, initialised from the scene; change them between steps.
   contact::SolverKind solver = contact::SolverKind::kLocalUzawa;
   contact::SolverParameters parameters;
+  // Build of the step's compliance sums (compliance_kernels.h): the fastest this CPU runs.
+  ComplianceKernel compliance_kernel = FastestComplianceKernel();
 
   const StepOutput& last_output() const { return output_; }
   const std::vector<StepContact>& contacts() const { return contacts_; }

@@ -188,12 +188,13 @@ int Run(const Options& options) {
   }
   hapco::UseRealtimePriority(options.rt_priority, "hapco-server");
   hapco::service::ServerLoop server(served, options.domain, server_options);
-  std::printf("hapco-server: scene%s %s, domain %d, server id %s, %d stepping thread%s%s, ready in %.2f s\n",
+  std::printf("hapco-server: scene%s %s, domain %d, server id %s, %d stepping thread%s%s, %s compliance kernels, "
+              "ready in %.2f s\n",
               served.size() > 1 ? "s" : "", scenes_line.c_str(), options.domain, server_options.server_id.c_str(),
               server_options.threads,
               server_options.threads > 1 ? "s" : "",
               server_options.physics == hapco::service::SessionPhysics::kNone ? ", physics none (zero force)" : "",
-              setup.ElapsedSeconds());
+              hapco::sim::ComplianceKernelName(hapco::sim::FastestComplianceKernel()), setup.ElapsedSeconds());
   std::fflush(stdout);
 
   const auto watching = stop_signals.Watch([&server] { server.RequestStop(); });

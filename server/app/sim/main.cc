@@ -288,10 +288,11 @@ int Run(const Options& options) {
     std::snprintf(acceleration, sizeof acceleration, "Anderson depth %d after %d sweeps",
                   session.parameters.anderson_depth, session.parameters.anderson_start);
   }
-  std::printf("solver %s, tolerance %.3g m, mu %.3g, %s start, %s, compliance %s\n",
+  std::printf("solver %s, tolerance %.3g m, mu %.3g, %s start, %s, compliance %s (%s kernels)\n",
               std::string(hapco::contact::SolverName(session.solver)).c_str(),
               session.parameters.global_tolerance_m, scene.friction_coefficient,
-              session.parameters.warm_start ? "warm" : "cold", acceleration, options.compliance.c_str());
+              session.parameters.warm_start ? "warm" : "cold", acceleration, options.compliance.c_str(),
+              hapco::sim::ComplianceKernelName(session.compliance_kernel));
   if (csv != nullptr) {
     std::fprintf(csv, "step,phase,dx_m,dy_m,dz_m,fx_n,fy_n,fz_n,device_fx_n,device_fy_n,device_fz_n,"
                       "contacts,separating,sticking,sliding,outer_iterations,inner_iterations,"

@@ -12,6 +12,7 @@
 //     the clients and other sessions run between two 1 kHz ticks: the step with cold caches.
 // The machine is shared: the load average is printed at start and end. Prints numbers only.
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <cmath>
 #include <cstdio>
@@ -73,7 +74,15 @@ struct Options {
   std::string csv;
   std::string path = "scene";  // or "top-face"
   int cold_mib = 0;  // MiB read between steps (0: warm caches)
+  std::string kernel = "fastest";  // compliance kernels of the step (sim/compliance_kernels.h)
+  int kernel_repeats = 3;          // interleaved runs per kernel in the kernel comparison (0: skip)
 };
+
+sim::ComplianceKernel KernelByName(const std::string& name) {
+  if (name == "portable") return sim::ComplianceKernel::kPortable;
+  if (name == "avx2-fma") return sim::ComplianceKernel::kAvx2Fma;
+  return sim::FastestComplianceKernel();
+}
 
 // The device path of the run: the scene's trajectory, or the top-face sweep.
 std::vector<Eigen::Vector3d> DevicePath(const sim::SceneSpec& scene, const std::string& name) {
@@ -155,6 +164,14 @@ bool Parse(int argc, char** argv, Options* options) {
                      "read M MiB of other data between steps (cold caches, as in the server, where DDS, the "
                      "clients and other sessions run between two 1 kHz ticks; default 0)",
                      "Run", 0, 65536);
+  command.AddChoice("--kernel", &options->kernel, {"fastest", "portable", "avx2-fma"},
+                    "compliance kernels of the timed runs (sim/compliance_kernels.h; default fastest: avx2-fma "
+                    "where the CPU has it)",
+                    "Run");
+  command.AddInteger("--kernel-repeats", &options->kernel_repeats, "N",
+                     "runs per kernel, interleaved, in the portable vs avx2-fma comparison (default 3; 0 = skip; "
+                     "skipped where the CPU lacks AVX2/FMA)",
+                     "Run", 0, 1000);
   command.AddCsv(&options->csv, "per-step rows of the last precomputed run");
   command.Deprecate("--scene", "");
   return command.Parse(argc, argv);
@@ -204,6 +221,7 @@ int Run(const Options& options) {
   std::vector<double> local_model_s, local_model_alloc, local_model_unknowns;
   for (int repeat = 0; repeat < options.repeats; ++repeat) {
     sim::TwoBodySession session(model, sim::SolveMode::kPrecomputed);
+    session.compliance_kernel = KernelByName(options.kernel);
     sim::LocalModelBuilder local_model;
     for (int step = 1; step <= steps; ++step) {
       const Eigen::Vector3d& d = path[static_cast<std::size_t>(step)];
@@ -234,8 +252,9 @@ int Run(const Options& options) {
     std::fprintf(stderr, "precomputed run %d/%d done\n", repeat + 1, options.repeats);
   }
   if (csv != nullptr) std::fclose(csv);
-  std::printf("\nprecomputed mode, %d steps x %d runs (%ld outer iterations per run)%s:\n", steps, options.repeats,
-              outer_iterations / options.repeats,
+  std::printf("\nprecomputed mode, %d steps x %d runs (%ld outer iterations per run, %s kernels)%s:\n", steps,
+              options.repeats, outer_iterations / options.repeats,
+              sim::ComplianceKernelName(KernelByName(options.kernel)),
               cold.empty() ? "" : (", " + std::to_string(options.cold_mib) + " MiB read between steps").c_str());
   volatile double keep_eviction_reads = cold_sum;  // the reads must not be optimised away
   (void)keep_eviction_reads;
@@ -273,6 +292,47 @@ int Run(const Options& options) {
     PrintRow("surface ahead", probe_s);
     std::printf("  surface ahead (not in the step above: steps without contact only): %d of %d poses 0..10 mm "
                 "above the path found it\n", found, steps);
+  }
+
+  if (options.kernel_repeats > 0 && sim::FastestComplianceKernel() == sim::ComplianceKernel::kAvx2Fma) {
+    // The same path with each build of the compliance sums, runs interleaved (portable,
+    // avx2-fma, portable, ...) so a drift of the machine hits both: step and stage medians, the
+    // ratio, and how far their forces are apart (rounding only: the order of additions).
+    const std::array<sim::ComplianceKernel, 2> kernels = {sim::ComplianceKernel::kPortable,
+                                                         sim::ComplianceKernel::kAvx2Fma};
+    std::array<Series, 2> series;
+    std::array<std::vector<Eigen::Vector3d>, 2> forces;
+    for (int repeat = 0; repeat < options.kernel_repeats; ++repeat) {
+      for (std::size_t k = 0; k < kernels.size(); ++k) {
+        sim::TwoBodySession session(model, sim::SolveMode::kPrecomputed);
+        session.compliance_kernel = kernels[k];
+        forces[k].clear();
+        for (int step = 1; step <= steps; ++step) {
+          if (!cold.empty()) cold_sum += EvictCaches(&cold);
+          const sim::StepOutput& out = session.Step(path[static_cast<std::size_t>(step)]);
+          series[k].Add(out);
+          forces[k].push_back(out.contact_force_n);
+        }
+      }
+    }
+    double worst_difference_n = 0.0, peak_n = 0.0;
+    for (std::size_t i = 0; i < forces[0].size(); ++i) {
+      worst_difference_n = std::max(worst_difference_n, (forces[0][i] - forces[1][i]).norm());
+      peak_n = std::max(peak_n, forces[0][i].norm());
+    }
+    std::printf("\ncompliance kernels, %d interleaved runs each (same path):\n", options.kernel_repeats);
+    for (std::size_t k = 0; k < kernels.size(); ++k) {
+      std::printf(" %s:\n", sim::ComplianceKernelName(kernels[k]));
+      PrintRow("step", series[k].step);
+      PrintRow("detect", series[k].detect);
+      PrintRow("assemble", series[k].assemble);
+    }
+    std::printf("  ratio portable / avx2-fma: step median %.2f, p99 %.2f; detect median %.2f; assemble median %.2f\n",
+                Percentile(series[0].step, 0.5) / Percentile(series[1].step, 0.5),
+                Percentile(series[0].step, 0.99) / Percentile(series[1].step, 0.99),
+                Percentile(series[0].detect, 0.5) / Percentile(series[1].detect, 0.5),
+                Percentile(series[0].assemble, 0.5) / Percentile(series[1].assemble, 0.5));
+    std::printf("  max |F_portable - F_avx2-fma| = %.2e N over the path (peak %.3f N)\n", worst_difference_n, peak_n);
   }
 
   if (options.full_steps > 0) {
