@@ -264,6 +264,31 @@ ContactDetector::ContactDetector(std::vector<fem::SurfaceTriangle> obstacle_tria
   const int depth = BuildNode(centroids, 0, n_tri, 0);
   stack_.reserve(static_cast<std::size_t>(2 * depth + 4));
   triangle_boxes_.resize(static_cast<std::size_t>(n_tri));
+  // The tree's inverse maps, for RefitEnabled.
+  slot_of_triangle_.resize(static_cast<std::size_t>(n_tri));
+  for (int slot = 0; slot < n_tri; ++slot) slot_of_triangle_[static_cast<std::size_t>(order_[static_cast<std::size_t>(slot)])] = slot;
+  leaf_of_slot_.assign(static_cast<std::size_t>(n_tri), -1);
+  parent_.assign(nodes_.size(), -1);
+  node_depth_.assign(nodes_.size(), 0);
+  std::vector<std::size_t> nodes_at_depth;
+  for (std::size_t index = 0; index < nodes_.size(); ++index) {
+    const BvhNode& node = nodes_[index];
+    if (nodes_at_depth.size() <= static_cast<std::size_t>(node_depth_[index])) nodes_at_depth.resize(static_cast<std::size_t>(node_depth_[index]) + 1, 0);
+    ++nodes_at_depth[static_cast<std::size_t>(node_depth_[index])];
+    if (node.count > 0) {
+      for (int slot = node.first; slot < node.first + node.count; ++slot) leaf_of_slot_[static_cast<std::size_t>(slot)] = static_cast<int>(index);
+    } else {
+      for (const auto child : {index + 1, static_cast<std::size_t>(node.right)}) {
+        parent_[child] = static_cast<int>(index);
+        node_depth_[child] = node_depth_[index] + 1;
+      }
+    }
+  }
+  nodes_by_depth_.resize(nodes_at_depth.size());
+  for (std::size_t d = 0; d < nodes_at_depth.size(); ++d) nodes_by_depth_[d].reserve(nodes_at_depth[d]);
+  refitted_slots_.reserve(static_cast<std::size_t>(n_tri));
+  refitted_nodes_.reserve(nodes_.size());
+  node_refitted_.assign(nodes_.size(), 0);
   candidates_.reserve(64);
 
   // Corner neighbours for persistent contacts (a node slides at most onto an adjacent face
@@ -338,34 +363,46 @@ void ContactDetector::ValidateCall(const PointsRef& obstacle_positions_m,
   CheckParameters(parameters);
 }
 
-void ContactDetector::Refit(const PointsRef& obstacle_positions_m,
-                            const CollisionParameters& parameters,
-                            const std::vector<char>* triangle_enabled) {
+ContactDetector::Box ContactDetector::InflatedBox(const PointsRef& obstacle_positions_m,
+                                                  const CollisionParameters& parameters, int triangle) const {
   // A qualifying node lies within max(activation, penetration) of the face plane and its
   // projection is within edge_tolerance (barycentric) of the face, i.e. at most
   // 2·edge_tolerance·extent outside the face's box along any axis (two coordinates can be
   // negative). Inflating each triangle's box by that margin makes the query a point-in-box
   // test that can never miss a pair the exact test would accept.
-  const double normal_margin_m =
-      std::max(parameters.activation_gap_m, parameters.max_penetration_m);
+  const double normal_margin_m = std::max(parameters.activation_gap_m, parameters.max_penetration_m);
+  const auto& tri = triangles_[static_cast<std::size_t>(triangle)];
+  const Eigen::Vector3d a = Row(obstacle_positions_m, tri.corners[0]);
+  const Eigen::Vector3d b = Row(obstacle_positions_m, tri.corners[1]);
+  const Eigen::Vector3d c = Row(obstacle_positions_m, tri.corners[2]);
+  Box box;
+  box.min = a.cwiseMin(b).cwiseMin(c);
+  box.max = a.cwiseMax(b).cwiseMax(c);
+  const double extent_m = (box.max - box.min).maxCoeff();
+  const double margin_m = normal_margin_m + (2.0 * parameters.edge_tolerance + 1e-12) * extent_m;
+  box.min.array() -= margin_m;
+  box.max.array() += margin_m;
+  return box;
+}
+
+namespace {
+void MakeEmpty(Eigen::Vector3d* min, Eigen::Vector3d* max) {
+  min->setConstant(std::numeric_limits<double>::infinity());  // empty: never entered
+  max->setConstant(-std::numeric_limits<double>::infinity());
+}
+}  // namespace
+
+void ContactDetector::Refit(const PointsRef& obstacle_positions_m,
+                            const CollisionParameters& parameters,
+                            const std::vector<char>* triangle_enabled) {
+  refit_empty_elsewhere_ = false;
   for (std::size_t slot = 0; slot < order_.size(); ++slot) {
-    const auto& tri = triangles_[static_cast<std::size_t>(order_[slot])];
     Box& box = triangle_boxes_[slot];
     if (triangle_enabled != nullptr && !(*triangle_enabled)[static_cast<std::size_t>(order_[slot])]) {
-      box.min.setConstant(std::numeric_limits<double>::infinity());  // empty: never entered
-      box.max.setConstant(-std::numeric_limits<double>::infinity());
+      MakeEmpty(&box.min, &box.max);
       continue;
     }
-    const Eigen::Vector3d a = Row(obstacle_positions_m, tri.corners[0]);
-    const Eigen::Vector3d b = Row(obstacle_positions_m, tri.corners[1]);
-    const Eigen::Vector3d c = Row(obstacle_positions_m, tri.corners[2]);
-    box.min = a.cwiseMin(b).cwiseMin(c);
-    box.max = a.cwiseMax(b).cwiseMax(c);
-    const double extent_m = (box.max - box.min).maxCoeff();
-    const double margin_m =
-        normal_margin_m + (2.0 * parameters.edge_tolerance + 1e-12) * extent_m;
-    box.min.array() -= margin_m;
-    box.max.array() += margin_m;
+    box = InflatedBox(obstacle_positions_m, parameters, order_[slot]);
   }
   // Children follow their parent, so a reverse sweep sees children first.
   for (auto node = nodes_.rbegin(); node != nodes_.rend(); ++node) {
@@ -383,6 +420,54 @@ void ContactDetector::Refit(const PointsRef& obstacle_positions_m,
       node->box.min = l.min.cwiseMin(r.min);
       node->box.max = l.max.cwiseMax(r.max);
     }
+  }
+}
+
+void ContactDetector::RefitEnabled(const PointsRef& obstacle_positions_m, const CollisionParameters& parameters,
+                                   const std::vector<int>& enabled_triangles) {
+  // Boxes a full Refit would make empty stay empty; only what the last call filled is cleared.
+  if (refit_empty_elsewhere_) {
+    for (int slot : refitted_slots_) MakeEmpty(&triangle_boxes_[static_cast<std::size_t>(slot)].min, &triangle_boxes_[static_cast<std::size_t>(slot)].max);
+    for (int node : refitted_nodes_) MakeEmpty(&nodes_[static_cast<std::size_t>(node)].box.min, &nodes_[static_cast<std::size_t>(node)].box.max);
+  } else {
+    for (Box& box : triangle_boxes_) MakeEmpty(&box.min, &box.max);
+    for (BvhNode& node : nodes_) MakeEmpty(&node.box.min, &node.box.max);
+    refit_empty_elsewhere_ = true;
+  }
+  for (int node : refitted_nodes_) node_refitted_[static_cast<std::size_t>(node)] = 0;
+  refitted_slots_.clear();
+  refitted_nodes_.clear();
+  for (int triangle : enabled_triangles) {
+    const int slot = slot_of_triangle_[static_cast<std::size_t>(triangle)];
+    triangle_boxes_[static_cast<std::size_t>(slot)] = InflatedBox(obstacle_positions_m, parameters, triangle);
+    refitted_slots_.push_back(slot);
+    for (int node = leaf_of_slot_[static_cast<std::size_t>(slot)]; node >= 0 && !node_refitted_[static_cast<std::size_t>(node)];
+         node = parent_[static_cast<std::size_t>(node)]) {
+      node_refitted_[static_cast<std::size_t>(node)] = 1;
+      refitted_nodes_.push_back(node);
+      nodes_by_depth_[static_cast<std::size_t>(node_depth_[static_cast<std::size_t>(node)])].push_back(node);
+    }
+  }
+  // Deepest first: a node's children are refitted (or empty) before it. Same unions in the
+  // same order as Refit, so the same bits.
+  for (auto bucket = nodes_by_depth_.rbegin(); bucket != nodes_by_depth_.rend(); ++bucket) {
+    for (int index : *bucket) {
+      BvhNode& node = nodes_[static_cast<std::size_t>(index)];
+      if (node.count > 0) {
+        node.box = triangle_boxes_[static_cast<std::size_t>(node.first)];
+        for (int i = 1; i < node.count; ++i) {
+          const Box& b = triangle_boxes_[static_cast<std::size_t>(node.first + i)];
+          node.box.min = node.box.min.cwiseMin(b.min);
+          node.box.max = node.box.max.cwiseMax(b.max);
+        }
+      } else {
+        const Box& l = nodes_[static_cast<std::size_t>(index) + 1].box;
+        const Box& r = nodes_[static_cast<std::size_t>(node.right)].box;
+        node.box.min = l.min.cwiseMin(r.min);
+        node.box.max = l.max.cwiseMax(r.max);
+      }
+    }
+    bucket->clear();
   }
 }
 
@@ -535,7 +620,11 @@ void ContactDetector::Detect(const PointsRef& obstacle_positions_m,
                "one enabled flag per tool node");
   HAPCO_ASSERT(context.triangle_enabled == nullptr || context.triangle_enabled->size() == triangles_.size(),
                "one enabled flag per triangle");
-  Refit(obstacle_positions_m, parameters, context.triangle_enabled);
+  if (context.triangle_enabled != nullptr && context.enabled_triangles != nullptr) {
+    RefitEnabled(obstacle_positions_m, parameters, *context.enabled_triangles);
+  } else {
+    Refit(obstacle_positions_m, parameters, context.triangle_enabled);
+  }
   ++detect_call_;  // every face's geometry is recomputed on its first test
   contacts->clear();
   stats_ = DetectorStats{};

@@ -116,6 +116,10 @@ struct DetectionContext {
   // positions, nodes out of the broad phase's region). nullptr: everything is enabled.
   const std::vector<char>* triangle_enabled = nullptr;
   const std::vector<char>* node_enabled = nullptr;
+  // Optional, with triangle_enabled: the ids of the enabled triangles (any order, each once).
+  // Then only their boxes and the tree nodes above them are refitted, so the detector's cost
+  // follows the faces near the tool and not the surface's size.
+  const std::vector<int>* enabled_triangles = nullptr;
 };
 
 // Work counters of the last Detect call, for tests and benchmarks.
@@ -218,6 +222,11 @@ class ContactDetector {
                     const CollisionParameters& parameters) const;
   void Refit(const PointsRef& obstacle_positions_m, const CollisionParameters& parameters,
              const std::vector<char>* triangle_enabled);
+  // The same boxes, computed for the enabled triangles and the nodes above them only; every
+  // other box is empty (kept so between calls: refit_empty_elsewhere_).
+  void RefitEnabled(const PointsRef& obstacle_positions_m, const CollisionParameters& parameters,
+                    const std::vector<int>& enabled_triangles);
+  Box InflatedBox(const PointsRef& obstacle_positions_m, const CollisionParameters& parameters, int triangle) const;
   // Exact test of one triangle; appends to candidates_ when the pair qualifies.
   // max_depth_m: deepest gap accepted; previous_normal: unit normal of the node's previous
   // face (zero without history).
@@ -239,6 +248,14 @@ class ContactDetector {
   std::vector<int> order_;          // triangle ids in leaf order
   std::vector<BvhNode> nodes_;      // nodes_[0] is the root
   std::vector<Box> triangle_boxes_;  // per order_ slot, inflated by the search margin
+  // For RefitEnabled: each triangle's slot in order_, each slot's leaf, each node's parent
+  // (-1 at the root) and depth; the slots and nodes it made non-empty, nodes bucketed by depth
+  // (deepest refitted first, so children come before their parents).
+  std::vector<int> slot_of_triangle_, leaf_of_slot_, parent_, node_depth_;
+  std::vector<int> refitted_slots_, refitted_nodes_;
+  std::vector<std::vector<int>> nodes_by_depth_;
+  std::vector<char> node_refitted_;
+  bool refit_empty_elsewhere_ = false;  // every box outside refitted_* is empty
   std::vector<int> stack_;          // traversal stack, sized once
   std::vector<Candidate> candidates_;  // per-query scratch, capacity reused
   // Faces sharing a corner with each face (itself included): CSR offsets and ids.

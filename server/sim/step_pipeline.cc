@@ -71,6 +71,9 @@ TwoBodySession::TwoBodySession(const TwoBodyModel& model, SolveMode mode)
   workspace_.Reserve(max_contacts_, parameters.max_iterations);
   result_.Reserve(max_contacts_, parameters.max_iterations);
   region_.reserve(n_obstacle);
+  enabled_triangles_.reserve(obstacle_surface_.triangles.size());
+  near_triangles_.reserve(obstacle_surface_.triangles.size());
+  tree_stack_.reserve(static_cast<std::size_t>(obstacle_surface_.triangle_tree.depth()) + 1);
   region_free_.reserve(n_obstacle);
   region_runs_.reserve(n_obstacle);
   loaded_runs_.reserve(n_obstacle);
@@ -104,7 +107,10 @@ void TwoBodySession::Reset() {
   tool_positions_m_ = model_.tool().mesh().nodes_m;
   region_.clear();
   in_region_.assign(n_obstacle, mode_ == SolveMode::kFullSolve ? 1 : 0);
-  obstacle_triangle_enabled_.assign(obstacle_surface_.triangles.size(), 1);
+  // Full solves keep every face enabled; the precomputed mode's broad phase enables the faces
+  // near the tool (enabled_triangles_) each step.
+  obstacle_triangle_enabled_.assign(obstacle_surface_.triangles.size(), mode_ == SolveMode::kFullSolve ? 1 : 0);
+  enabled_triangles_.clear();
   edge_node_enabled_.assign(edge_node_slot_.size(), 1);
   tool_previous_triangle_.assign(n_tool, -1);
   edge_previous_triangle_.assign(edge_node_slot_.size(), -1);
@@ -171,14 +177,15 @@ void TwoBodySession::BroadPhase(const Eigen::Vector3d& increment_m) {
   }
   const Eigen::Vector3d far_lo = lo.array() - (moved_anywhere.array() + near_m);
   const Eigen::Vector3d far_hi = hi.array() + (moved_anywhere.array() + near_m);
-  for (std::size_t t = 0; t < triangles.size(); ++t) {
-    if (!((obstacle_surface_.triangle_min_m[t].array() <= far_hi.array()).all() &&
-          (obstacle_surface_.triangle_max_m[t].array() >= far_lo.array()).all())) {
-      obstacle_triangle_enabled_[t] = 0;
-      continue;
-    }
+  // Only the faces whose reference box meets that far box are looked at (a tree query, not a
+  // pass over the whole surface); the others stay disabled.
+  for (int t : enabled_triangles_) obstacle_triangle_enabled_[static_cast<std::size_t>(t)] = 0;
+  enabled_triangles_.clear();
+  near_triangles_.clear();
+  obstacle_surface_.triangle_tree.Overlapping(far_lo, far_hi, &near_triangles_, &tree_stack_);
+  for (int t : near_triangles_) {
     Eigen::Vector3d moved = Eigen::Vector3d::Zero();
-    const auto& tri = triangles[t];
+    const auto& tri = triangles[static_cast<std::size_t>(t)];
     for (int k = 0; k < 3; ++k) {
       for (int node : {tri.corners[static_cast<std::size_t>(k)], tri.midsides[static_cast<std::size_t>(k)]}) {
         if (node < 0) continue;
@@ -187,10 +194,11 @@ void TwoBodySession::BroadPhase(const Eigen::Vector3d& increment_m) {
       }
     }
     const Eigen::Vector3d grow = moved.array() + near_m;
-    const bool enabled = ((obstacle_surface_.triangle_min_m[t] - grow).array() <= hi.array()).all() &&
-                         ((obstacle_surface_.triangle_max_m[t] + grow).array() >= lo.array()).all();
-    obstacle_triangle_enabled_[t] = enabled ? 1 : 0;
+    const bool enabled = ((obstacle_surface_.triangle_min_m[static_cast<std::size_t>(t)] - grow).array() <= hi.array()).all() &&
+                         ((obstacle_surface_.triangle_max_m[static_cast<std::size_t>(t)] + grow).array() >= lo.array()).all();
     if (!enabled) continue;
+    obstacle_triangle_enabled_[static_cast<std::size_t>(t)] = 1;
+    enabled_triangles_.push_back(t);
     // The detector reads the searched triangles' corners only (flat faces; with the
     // FOUR_SUBTRIANGLES search these include the 6-node faces' midsides); the other midsides of
     // the faces that end up in contact are added after detection (CompleteContactDisplacements).
@@ -287,7 +295,8 @@ void TwoBodySession::DetectContacts(const Eigen::Vector3d& device_translation_m)
   tool_pass_parameters_.max_penetration_m = std::min(max_new_depth_obstacle_m_, new_depth_m);
   edge_pass_parameters_.max_penetration_m = std::min(max_new_depth_tool_m_, new_depth_m);
   tool_pass_.Detect(obstacle_positions_m_, tool_positions_m_, tool_pass_parameters_, &tool_pass_points_,
-                    {&tool_previous_triangle_, &obstacle_triangle_enabled_, nullptr});
+                    {&tool_previous_triangle_, &obstacle_triangle_enabled_, nullptr,
+                     mode_ == SolveMode::kPrecomputed ? &enabled_triangles_ : nullptr});
   edge_pass_.Detect(tool_positions_m_, obstacle_positions_m_, edge_pass_parameters_, &edge_pass_points_,
                     {&edge_previous_triangle_, nullptr, &edge_node_enabled_});
   std::fill(tool_previous_triangle_.begin(), tool_previous_triangle_.end(), -1);

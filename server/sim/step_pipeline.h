@@ -182,6 +182,8 @@ class TwoBodySession {
   std::vector<int> region_free_;  // region slots that carry no load
   std::vector<std::pair<int, int>> region_runs_, loaded_runs_;  // [begin, end) runs of region_free_, obstacle_loaded_
   std::vector<char> in_region_, obstacle_triangle_enabled_, edge_node_enabled_;
+  std::vector<int> enabled_triangles_;  // the faces flagged in obstacle_triangle_enabled_
+  std::vector<int> near_triangles_, tree_stack_;  // broad-phase tree query: hits, scratch
   Eigen::VectorXd cell_moved_m_;  // per cell and axis: bound on the last displacement, m
   // Pass 1: tool nodes vs obstacle faces; pass 2: obstacle edge nodes vs tool faces.
   CollisionParameters tool_pass_parameters_, edge_pass_parameters_;

@@ -65,6 +65,7 @@ ContactSurface DescribeSurface(const fem::Mesh& mesh, std::vector<fem::SurfaceTr
     surface.longest_edge_m =
         std::max({surface.longest_edge_m, (p1 - p0).norm(), (p2 - p1).norm(), (p0 - p2).norm()});
   }
+  surface.triangle_tree = StaticBoxTree(surface.triangle_min_m, surface.triangle_max_m);
   surface.nodes = FaceNodes(surface.triangles);
   surface.node_index = IndexOf(surface.nodes, mesh.num_nodes());
 

@@ -19,6 +19,7 @@
 
 #include "fem/elastic_body.h"
 #include "sim/blocked_compliance.h"
+#include "sim/box_tree.h"
 #include "sim/collision.h"
 #include "sim/scene.h"
 
@@ -52,8 +53,9 @@ struct ContactSurface {
   // contiguous 3x3 block per node pair for the 1 kHz step (BlockedCompliance).
   BlockedCompliance compliance_m_per_n;
   double longest_edge_m = 0.0;  // longest edge of the searched triangles, m
-  // Reference bounding box of each face, m.
+  // Reference bounding box of each face, m, and a tree over them (the broad phase's query).
   std::vector<Eigen::Vector3d> triangle_min_m, triangle_max_m;
+  StaticBoxTree triangle_tree;
   // Broad-phase bound (rigorous, per axis): the surface's nodes are binned into a grid of
   // cells; for cell c, axis a and node j, cell_axis_bound_m_per_n(3c + a, j) is the largest
   // ||C(3i + a, 3j..3j+2)|| over the nodes i of c. Under nodal forces f_j no node of c moves

@@ -22,6 +22,7 @@
 #include "common/error.h"
 #include "fem/box_mesh.h"
 #include "fem/mesh.h"
+#include "sim/box_tree.h"
 
 // Counts heap allocations while g_count_allocations is set (allocation-free Detect test).
 namespace {
@@ -530,6 +531,106 @@ TEST(ContactDetectorTest, TrianglesTestedPerQueryStaySmallOnBigMesh) {
             << " boxes visited (brute force: " << st.triangles_total << " triangles)\n";
   EXPECT_LT(tested, 0.01 * static_cast<double>(st.triangles_total));
   EXPECT_LT(visited, 0.01 * static_cast<double>(detector.bvh_node_count()));
+}
+
+// The step passes the list of enabled faces too (DetectionContext::enabled_triangles), and then
+// only those boxes and the tree nodes above them are refitted. Over changing subsets (each call
+// must clear what the last one filled), in both orders of calls, it finds exactly what the
+// flags alone find, and with no faces enabled it finds nothing.
+TEST(ContactDetectorTest, RefitOfTheEnabledFacesOnlyFindsWhatTheFlagsFind) {
+  const fem::Mesh mesh = fem::MakeBoxMesh(ObstacleSpec(fem::ElementOrder::kTet10, {20, 4, 4}));
+  const auto tris = fem::BoundaryTriangles(mesh);
+  std::mt19937 rng(99);
+  std::uniform_real_distribution<double> ux(-0.003, 0.103), uy(-0.003, 0.023), uz(-0.003, 0.023);
+  std::vector<Eigen::Vector3d> q;
+  for (int i = 0; i < 2000; ++i) q.emplace_back(ux(rng), uy(rng), uz(rng));
+  const Points tool = ToPoints(q);
+  CollisionParameters params;
+  params.activation_gap_m = 2e-3;
+  params.max_penetration_m = 2e-3;
+  ContactDetector with_list(tris, mesh.nodes_m, Iota(tool.rows()));
+  ContactDetector flags_only(tris, mesh.nodes_m, Iota(tool.rows()));
+  const Points obstacle = Sagged(mesh, 1e-3);
+  std::size_t compared = 0;
+  for (int round = 0; round < 8; ++round) {
+    // A box of the surface (as the broad phase enables), a random scatter, nothing, everything.
+    std::vector<char> enabled(tris.size(), 0);
+    std::vector<int> list;
+    const double x0 = 0.012 * round;
+    for (std::size_t t = 0; t < tris.size(); ++t) {
+      const double x = mesh.nodes_m(tris[t].corners[0], 0);
+      const bool on = round == 6 ? false : round == 7 ? true : round % 2 == 0 ? (x >= x0 && x <= x0 + 0.03) : (rng() % 3 == 0);
+      if (on) {
+        enabled[t] = 1;
+        list.push_back(static_cast<int>(t));
+      }
+    }
+    std::shuffle(list.begin(), list.end(), rng);  // any order
+    std::vector<ContactPoint> a, b;
+    DetectionContext listed;
+    listed.triangle_enabled = &enabled;
+    listed.enabled_triangles = &list;
+    DetectionContext flagged;
+    flagged.triangle_enabled = &enabled;
+    with_list.Detect(obstacle, tool, params, &a, listed);
+    flags_only.Detect(obstacle, tool, params, &b, flagged);
+    ASSERT_EQ(a.size(), b.size()) << "round " << round;
+    for (std::size_t i = 0; i < a.size(); ++i) {
+      EXPECT_EQ(a[i].tool_node, b[i].tool_node);
+      EXPECT_EQ(a[i].obstacle_triangle, b[i].obstacle_triangle);
+      EXPECT_EQ(a[i].gap_m, b[i].gap_m);
+      EXPECT_TRUE(enabled[static_cast<std::size_t>(a[i].obstacle_triangle)]);
+    }
+    compared += a.size();
+    if (round == 6) {
+      EXPECT_TRUE(a.empty());
+    }
+    if (round == 7) {
+      EXPECT_GT(a.size(), 300u);
+    }
+    // A full refit in between (no list) must not leave stale boxes for the next listed call.
+    if (round == 3) with_list.Detect(obstacle, tool, params, &a);
+  }
+  EXPECT_GT(compared, 800u);
+}
+
+TEST(StaticBoxTreeTest, OverlapQueriesMatchATestOfEveryBox) {
+  std::mt19937 rng(4);
+  std::uniform_real_distribution<double> corner(0.0, 1.0), size(0.0, 0.05);
+  std::vector<Eigen::Vector3d> lo, hi;
+  for (int i = 0; i < 1500; ++i) {
+    const Eigen::Vector3d a(corner(rng), corner(rng), corner(rng));
+    const Eigen::Vector3d d = i % 10 == 0 ? Eigen::Vector3d::Zero() : Eigen::Vector3d(size(rng), size(rng), size(rng));
+    lo.push_back(a);
+    hi.push_back(a + d);  // every tenth box is a point
+  }
+  const StaticBoxTree tree(lo, hi);
+  ASSERT_EQ(tree.size(), 1500);
+  std::vector<int> hits, stack;
+  stack.reserve(static_cast<std::size_t>(tree.depth()) + 1);
+  std::size_t total = 0;
+  for (int query = 0; query < 200; ++query) {
+    const Eigen::Vector3d a(corner(rng), corner(rng), corner(rng));
+    const Eigen::Vector3d b = a + Eigen::Vector3d::Constant(query % 2 == 0 ? 0.1 : 0.0);
+    hits.clear();
+    tree.Overlapping(a, b, &hits, &stack);
+    std::vector<int> expected;
+    for (int i = 0; i < 1500; ++i) {
+      if ((lo[i].array() <= b.array()).all() && (hi[i].array() >= a.array()).all()) expected.push_back(i);
+    }
+    std::sort(hits.begin(), hits.end());
+    EXPECT_EQ(hits, expected) << "query " << query;
+    total += expected.size();
+    EXPECT_LE(stack.capacity(), static_cast<std::size_t>(tree.depth()) + 1);  // never grew
+  }
+  EXPECT_GT(total, 200u);
+  // Touching counts (closed boxes): the query [hi, hi] of a box finds it.
+  hits.clear();
+  tree.Overlapping(hi[7], hi[7], &hits, &stack);
+  EXPECT_NE(std::find(hits.begin(), hits.end(), 7), hits.end());
+  hits.clear();
+  StaticBoxTree().Overlapping(lo[0], hi[0], &hits, &stack);
+  EXPECT_TRUE(hits.empty());
 }
 
 TEST(ContactDetectorTest, DetectIsAllocationFreeOnceWarmedUp) {

@@ -1,0 +1,45 @@
+#pragma once
+
+#include <vector>
+
+#include <Eigen/Dense>
+
+namespace hapco::sim {
+
+// A bounding-volume tree over fixed axis-aligned boxes, built once: which boxes overlap a
+// query box, in O(log n + hits) instead of a pass over all n. The step's broad phase asks it
+// for the faces near the tool (TwoBodySession::BroadPhase), so that the step's cost follows
+// the tool's neighbourhood and not the surface's size (issue 11, item 5).
+class StaticBoxTree {
+ public:
+  StaticBoxTree() = default;
+  // Box i is [min_m[i], max_m[i]] (m; a point when min = max). Both vectors have one entry
+  // per box.
+  StaticBoxTree(const std::vector<Eigen::Vector3d>& min_m, const std::vector<Eigen::Vector3d>& max_m);
+
+  int size() const { return static_cast<int>(box_min_m_.size()); }
+  // Deepest root-to-leaf path (nodes): a traversal stack never holds more than this.
+  int depth() const { return depth_; }
+
+  // Appends to *hits the ids of the boxes that overlap [lo, hi] (closed: touching counts), in
+  // no particular order. *stack is scratch; reserve depth() + 1 entries for an
+  // allocation-free call.
+  void Overlapping(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, std::vector<int>* hits,
+                   std::vector<int>* stack) const;
+
+ private:
+  // Leaves hold order_[first, first + count); an internal node (count == 0) has its left
+  // child right after it and its right child at `right`.
+  struct Node {
+    Eigen::Vector3d min_m, max_m;
+    int first = 0, count = 0, right = -1;
+  };
+  int Build(int begin, int end, int depth);
+
+  std::vector<Eigen::Vector3d> box_min_m_, box_max_m_;
+  std::vector<int> order_;
+  std::vector<Node> nodes_;
+  int depth_ = 0;
+};
+
+}  // namespace hapco::sim
