@@ -79,6 +79,8 @@ TwoBodySession::TwoBodySession(const TwoBodyModel& model, SolveMode mode)
   loaded_runs_.reserve(n_obstacle);
   cell_moved_m_ = Eigen::VectorXd::Zero(3 * obstacle_surface_.num_cells);
   tool_loaded_.reserve(n_tool);
+  tool_free_runs_.reserve(n_tool);
+  tool_loaded_runs_.reserve(n_tool);
   previous_ids_.reserve(static_cast<std::size_t>(max_contacts_));
   obstacle_loaded_.reserve(n_obstacle);
   edge_node_slot_.resize(n_edge);
@@ -562,13 +564,19 @@ void TwoBodySession::UpdatePrecomputed() {
   // U_tool = U_free(d) + C f over the tool surface (algorithms.md §5, §6), from the compliance
   // columns of the loaded slots only. The obstacle's U is evaluated by the next broad phase on
   // the region it needs, from the loaded slots kept here.
-  const BlockedCompliance& tool_compliance = tool_surface_.compliance_m_per_n;
+  // The same kernel as the obstacle's region (AddComplianceTimesForces), on every tool slot.
   tool_displacement_m_ = tool_free_m_;
-  const int n_tool = tool_compliance.nodes();
-  for (int slot : tool_loaded_) {
-    const Eigen::Vector3d f = Block(tool_slot_force_n_, slot);
-    for (int i = 0; i < n_tool; ++i) tool_displacement_m_.segment<3>(3 * i).noalias() += tool_compliance.block(i, slot) * f;
+  std::sort(tool_loaded_.begin(), tool_loaded_.end());
+  tool_free_runs_.clear();
+  const int n_tool = tool_surface_.compliance_m_per_n.nodes();
+  for (int i = 0; i < n_tool; ++i) {
+    if (tool_slot_loaded_[static_cast<std::size_t>(i)]) continue;
+    if (tool_free_runs_.empty() || tool_free_runs_.back().second != i) tool_free_runs_.push_back({i, i + 1});
+    else tool_free_runs_.back().second = i + 1;
   }
+  SlotRuns(tool_loaded_, &tool_loaded_runs_);
+  AddComplianceTimesForces(compliance_kernel, tool_surface_.compliance_m_per_n, tool_free_runs_, tool_loaded_,
+                           tool_loaded_runs_, tool_slot_force_n_.data(), tool_displacement_m_.data());
 }
 
 ContactSample TwoBodySession::SampleContact(int alpha) const {
