@@ -525,10 +525,14 @@ void TwoBodySession::AssembleProblem(const PairBlocks& pair_blocks) {
     }
     problem_.free_displacement_m[3 * alpha] = a.frame.row(0).dot(total_m);
     problem_.free_displacement_m.segment<2>(3 * alpha + 1) = a.frame.bottomRows<2>() * increment_m;
-
-    // W_αβ = R_α [Σ_pq c_αp c_βq C(p, q)] R_βᵀ over both bodies; W is symmetric, so β ≥ α.
-    for (int beta = alpha; beta < m; ++beta) {
-      const StepContact& b = contacts_[static_cast<std::size_t>(beta)];
+  }
+  // W_αβ = R_α [Σ_pq c_αp c_βq C(p, q)] R_βᵀ over both bodies; W is symmetric, so α ≤ β. β
+  // outermost: the pair sums read C(p, q) in the columns q of β's nodes (BlockedCompliance),
+  // so one β's few columns serve every α in a row.
+  for (int beta = 0; beta < m; ++beta) {
+    const StepContact& b = contacts_[static_cast<std::size_t>(beta)];
+    for (int alpha = 0; alpha <= beta; ++alpha) {
+      const StepContact& a = contacts_[static_cast<std::size_t>(alpha)];
       const Eigen::Matrix3d world = pair_blocks(a, b);
       Eigen::Matrix3d local = a.frame * world * b.frame.transpose();
       if (beta == alpha && local(0, 0) < model_.rigid_contact_compliance_m_per_n()) {
