@@ -12,6 +12,8 @@
 //     the clients and other sessions run between two 1 kHz ticks: the step with cold caches.
 // The machine is shared: the load average is printed at start and end. Prints numbers only.
 #include <algorithm>
+#include <chrono>
+#include <thread>
 #include <array>
 #include <atomic>
 #include <cmath>
@@ -74,6 +76,7 @@ struct Options {
   std::string csv;
   std::string path = "scene";  // or "top-face"
   int cold_mib = 0;  // MiB read between steps (0: warm caches)
+  int pace_us = 0;   // steps start every pace_us, sleeping in between, as the server's tick (0: back to back)
   std::string kernel = "fastest";  // compliance kernels of the step (sim/compliance_kernels.h)
   int kernel_repeats = 3;          // interleaved runs per kernel in the kernel comparison (0: skip)
 };
@@ -131,6 +134,17 @@ double EvictCaches(std::vector<double>* data) {
   return sum;
 }
 
+// Sleeps until the next tick, pace_us after the last one, as the server's tick loop does; a tick
+// already past (a slow step, or other work since) starts now instead of a burst of catch-up
+// steps back to back. No-op for pace_us = 0.
+void WaitForTick(int pace_us, std::chrono::steady_clock::time_point* next) {
+  if (pace_us <= 0) return;
+  *next += std::chrono::microseconds(pace_us);
+  const auto now = std::chrono::steady_clock::now();
+  if (*next < now) *next = now;
+  std::this_thread::sleep_until(*next);
+}
+
 void PrintRow(const char* name, const std::vector<double>& v) {
   std::printf("  %-11s median %9.1f us   p99 %9.1f us   max %9.1f us\n", name, 1e6 * Percentile(v, 0.5),
               1e6 * Percentile(v, 0.99), 1e6 * Percentile(v, 1.0));
@@ -160,6 +174,10 @@ bool Parse(int argc, char** argv, Options* options) {
                     "scene: the scene's trajectory (default); top-face: a 3 mm press and a 0.1 mm-step sweep over "
                     "the whole top face (tool from x = 5 mm to 95 mm)",
                     "Run");
+  command.AddInteger("--pace-us", &options->pace_us, "T",
+                     "start a step every T us and sleep in between, as a server's 1 kHz tick does (T = 1000); "
+                     "the core idles between steps (default 0: back to back)",
+                     "Run", 0, 1000000);
   command.AddInteger("--cold-mib", &options->cold_mib, "M",
                      "read M MiB of other data between steps (cold caches, as in the server, where DDS, the "
                      "clients and other sessions run between two 1 kHz ticks; default 0)",
@@ -219,6 +237,7 @@ int Run(const Options& options) {
   // The local contact model the server sends with each force (issue 12): timed after each
   // step, apart from it, with its allocations.
   std::vector<double> local_model_s, local_model_alloc, local_model_unknowns;
+  auto tick = std::chrono::steady_clock::now();
   for (int repeat = 0; repeat < options.repeats; ++repeat) {
     sim::TwoBodySession session(model, sim::SolveMode::kPrecomputed);
     session.compliance_kernel = KernelByName(options.kernel);
@@ -226,6 +245,7 @@ int Run(const Options& options) {
     for (int step = 1; step <= steps; ++step) {
       const Eigen::Vector3d& d = path[static_cast<std::size_t>(step)];
       if (!cold.empty()) cold_sum += EvictCaches(&cold);
+      WaitForTick(options.pace_us, &tick);
       const long before = g_allocations.load();
       const sim::StepOutput& out = session.Step(d);
       const long allocations = g_allocations.load() - before;
@@ -255,7 +275,9 @@ int Run(const Options& options) {
   std::printf("\nprecomputed mode, %d steps x %d runs (%ld outer iterations per run, %s kernels)%s:\n", steps,
               options.repeats, outer_iterations / options.repeats,
               sim::ComplianceKernelName(KernelByName(options.kernel)),
-              cold.empty() ? "" : (", " + std::to_string(options.cold_mib) + " MiB read between steps").c_str());
+              (std::string(cold.empty() ? "" : ", " + std::to_string(options.cold_mib) + " MiB read between steps") +
+               (options.pace_us > 0 ? ", one step every " + std::to_string(options.pace_us) + " us" : ""))
+                  .c_str());
   volatile double keep_eviction_reads = cold_sum;  // the reads must not be optimised away
   (void)keep_eviction_reads;
   PrintRow("step", all.step);
@@ -309,6 +331,7 @@ int Run(const Options& options) {
         forces[k].clear();
         for (int step = 1; step <= steps; ++step) {
           if (!cold.empty()) cold_sum += EvictCaches(&cold);
+          WaitForTick(options.pace_us, &tick);
           const sim::StepOutput& out = session.Step(path[static_cast<std::size_t>(step)]);
           series[k].Add(out);
           forces[k].push_back(out.contact_force_n);
