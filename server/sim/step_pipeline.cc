@@ -79,6 +79,7 @@ TwoBodySession::TwoBodySession(const TwoBodyModel& model, SolveMode mode)
   loaded_runs_.reserve(n_obstacle);
   cell_moved_m_ = Eigen::VectorXd::Zero(3 * obstacle_surface_.num_cells);
   tool_loaded_.reserve(n_tool);
+  tool_free_.reserve(n_tool);
   tool_free_runs_.reserve(n_tool);
   tool_loaded_runs_.reserve(n_tool);
   previous_ids_.reserve(static_cast<std::size_t>(max_contacts_));
@@ -571,13 +572,12 @@ void TwoBodySession::UpdatePrecomputed() {
   // The same kernel as the obstacle's region (AddComplianceTimesForces), on every tool slot.
   tool_displacement_m_ = tool_free_m_;
   std::sort(tool_loaded_.begin(), tool_loaded_.end());
-  tool_free_runs_.clear();
+  tool_free_.clear();
   const int n_tool = tool_surface_.compliance_m_per_n.nodes();
   for (int i = 0; i < n_tool; ++i) {
-    if (tool_slot_loaded_[static_cast<std::size_t>(i)]) continue;
-    if (tool_free_runs_.empty() || tool_free_runs_.back().second != i) tool_free_runs_.push_back({i, i + 1});
-    else tool_free_runs_.back().second = i + 1;
+    if (!tool_slot_loaded_[static_cast<std::size_t>(i)]) tool_free_.push_back(i);
   }
+  SlotRuns(tool_free_, &tool_free_runs_);
   SlotRuns(tool_loaded_, &tool_loaded_runs_);
   AddComplianceTimesForces(compliance_kernel, tool_surface_.compliance_m_per_n, tool_free_runs_, tool_loaded_,
                            tool_loaded_runs_, tool_slot_force_n_.data(), tool_displacement_m_.data());

@@ -181,7 +181,8 @@ class TwoBodySession {
   std::vector<int> region_;
   std::vector<int> region_free_;  // region slots that carry no load
   std::vector<std::pair<int, int>> region_runs_, loaded_runs_;  // [begin, end) runs of region_free_, obstacle_loaded_
-  std::vector<std::pair<int, int>> tool_free_runs_, tool_loaded_runs_;  // tool slots without / with load
+  std::vector<int> tool_free_;  // tool slots without load, ascending
+  std::vector<std::pair<int, int>> tool_free_runs_, tool_loaded_runs_;  // runs of tool_free_, tool_loaded_
   std::vector<char> in_region_, obstacle_triangle_enabled_, edge_node_enabled_;
   std::vector<int> enabled_triangles_;  // the faces flagged in obstacle_triangle_enabled_
   std::vector<int> near_triangles_, tree_stack_;  // broad-phase tree query: hits, scratch

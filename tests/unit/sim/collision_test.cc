@@ -301,19 +301,28 @@ Points Sagged(const fem::Mesh& mesh, double amplitude_m) {
   return x;
 }
 
+// Points all around the 100 x 20 x 20 mm bar, within a few mm of its surface.
+std::vector<Eigen::Vector3d> PointsAroundTheBar(std::mt19937* rng, int count) {
+  std::uniform_real_distribution<double> ux(-0.003, 0.103), uy(-0.003, 0.023), uz(-0.003, 0.023);
+  std::vector<Eigen::Vector3d> q;
+  for (int i = 0; i < count; ++i) q.emplace_back(ux(*rng), uy(*rng), uz(*rng));
+  return q;
+}
+
+CollisionParameters TwoMillimetreSearch() {
+  CollisionParameters params;
+  params.activation_gap_m = 2e-3;
+  params.max_penetration_m = 2e-3;
+  return params;
+}
+
 TEST(ContactDetectorTest, TreeMatchesBruteForceOnRandomPoints) {
   const fem::Mesh mesh = fem::MakeBoxMesh(ObstacleSpec(fem::ElementOrder::kTet10, {20, 4, 4}));
   const auto tris = fem::BoundaryTriangles(mesh);
   std::mt19937 rng(12345);
-  // Points all around the box, within a few mm of its surface.
-  std::uniform_real_distribution<double> ux(-0.003, 0.103), uy(-0.003, 0.023),
-      uz(-0.003, 0.023);
-  std::vector<Eigen::Vector3d> q;
-  for (int i = 0; i < 3000; ++i) q.emplace_back(ux(rng), uy(rng), uz(rng));
+  const std::vector<Eigen::Vector3d> q = PointsAroundTheBar(&rng, 3000);
   const Points tool = ToPoints(q);
-  CollisionParameters params;
-  params.activation_gap_m = 2e-3;
-  params.max_penetration_m = 2e-3;
+  const CollisionParameters params = TwoMillimetreSearch();
   ContactDetector detector(tris, mesh.nodes_m, Iota(tool.rows()));
   for (double sag_m : {0.0, 1e-3}) {
     const Points obstacle = Sagged(mesh, sag_m);
@@ -541,13 +550,8 @@ TEST(ContactDetectorTest, RefitOfTheEnabledFacesOnlyFindsWhatTheFlagsFind) {
   const fem::Mesh mesh = fem::MakeBoxMesh(ObstacleSpec(fem::ElementOrder::kTet10, {20, 4, 4}));
   const auto tris = fem::BoundaryTriangles(mesh);
   std::mt19937 rng(99);
-  std::uniform_real_distribution<double> ux(-0.003, 0.103), uy(-0.003, 0.023), uz(-0.003, 0.023);
-  std::vector<Eigen::Vector3d> q;
-  for (int i = 0; i < 2000; ++i) q.emplace_back(ux(rng), uy(rng), uz(rng));
-  const Points tool = ToPoints(q);
-  CollisionParameters params;
-  params.activation_gap_m = 2e-3;
-  params.max_penetration_m = 2e-3;
+  const Points tool = ToPoints(PointsAroundTheBar(&rng, 2000));
+  const CollisionParameters params = TwoMillimetreSearch();
   ContactDetector with_list(tris, mesh.nodes_m, Iota(tool.rows()));
   ContactDetector flags_only(tris, mesh.nodes_m, Iota(tool.rows()));
   const Points obstacle = Sagged(mesh, 1e-3);
