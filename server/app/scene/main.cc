@@ -14,6 +14,7 @@
 #include "common/timer.h"
 #include "fem/box_mesh.h"
 #include "io/scene_file.h"
+#include "sim/compliance_kernels.h"
 #include "sim/scene.h"
 #include "sim/two_body_model.h"
 
@@ -140,6 +141,9 @@ int Run(const Options& options) {
                 "compliance %.3g m/N\n",
                 mib(model.stats().operator_bytes), largest_diagonal(o.compliance_m_per_n),
                 model.rigid_contact_compliance_m_per_n());
+    std::printf("          the step reads them with the %s compliance kernels (this CPU's fastest; "
+                "sim/compliance_kernels.h)\n",
+                hapco::sim::ComplianceKernelName(hapco::sim::FastestComplianceKernel()));
     const std::string note = hapco::sim::StartingPositionNote(model);
     if (!note.empty()) std::printf("note      %s\n", note.c_str());
   }
