@@ -405,21 +405,23 @@ void ContactDetector::Refit(const PointsRef& obstacle_positions_m,
     box = InflatedBox(obstacle_positions_m, parameters, order_[slot]);
   }
   // Children follow their parent, so a reverse sweep sees children first.
-  for (auto node = nodes_.rbegin(); node != nodes_.rend(); ++node) {
-    if (node->count > 0) {
-      node->box = triangle_boxes_[static_cast<std::size_t>(node->first)];
-      for (int i = 1; i < node->count; ++i) {
-        const Box& b = triangle_boxes_[static_cast<std::size_t>(node->first + i)];
-        node->box.min = node->box.min.cwiseMin(b.min);
-        node->box.max = node->box.max.cwiseMax(b.max);
-      }
-    } else {
-      const auto self = static_cast<std::size_t>(nodes_.rend() - node - 1);
-      const Box& l = nodes_[self + 1].box;
-      const Box& r = nodes_[static_cast<std::size_t>(node->right)].box;
-      node->box.min = l.min.cwiseMin(r.min);
-      node->box.max = l.max.cwiseMax(r.max);
+  for (int index = static_cast<int>(nodes_.size()) - 1; index >= 0; --index) FitNode(index);
+}
+
+void ContactDetector::FitNode(int index) {
+  BvhNode& node = nodes_[static_cast<std::size_t>(index)];
+  if (node.count > 0) {
+    node.box = triangle_boxes_[static_cast<std::size_t>(node.first)];
+    for (int i = 1; i < node.count; ++i) {
+      const Box& b = triangle_boxes_[static_cast<std::size_t>(node.first + i)];
+      node.box.min = node.box.min.cwiseMin(b.min);
+      node.box.max = node.box.max.cwiseMax(b.max);
     }
+  } else {
+    const Box& l = nodes_[static_cast<std::size_t>(index) + 1].box;
+    const Box& r = nodes_[static_cast<std::size_t>(node.right)].box;
+    node.box.min = l.min.cwiseMin(r.min);
+    node.box.max = l.max.cwiseMax(r.max);
   }
 }
 
@@ -448,25 +450,10 @@ void ContactDetector::RefitEnabled(const PointsRef& obstacle_positions_m, const 
       nodes_by_depth_[static_cast<std::size_t>(node_depth_[static_cast<std::size_t>(node)])].push_back(node);
     }
   }
-  // Deepest first: a node's children are refitted (or empty) before it. Same unions in the
-  // same order as Refit, so the same bits.
+  // Deepest first: a node's children are refitted (or empty) before it. The same FitNode as
+  // Refit, so the same bits.
   for (auto bucket = nodes_by_depth_.rbegin(); bucket != nodes_by_depth_.rend(); ++bucket) {
-    for (int index : *bucket) {
-      BvhNode& node = nodes_[static_cast<std::size_t>(index)];
-      if (node.count > 0) {
-        node.box = triangle_boxes_[static_cast<std::size_t>(node.first)];
-        for (int i = 1; i < node.count; ++i) {
-          const Box& b = triangle_boxes_[static_cast<std::size_t>(node.first + i)];
-          node.box.min = node.box.min.cwiseMin(b.min);
-          node.box.max = node.box.max.cwiseMax(b.max);
-        }
-      } else {
-        const Box& l = nodes_[static_cast<std::size_t>(index) + 1].box;
-        const Box& r = nodes_[static_cast<std::size_t>(node.right)].box;
-        node.box.min = l.min.cwiseMin(r.min);
-        node.box.max = l.max.cwiseMax(r.max);
-      }
-    }
+    for (int index : *bucket) FitNode(index);
     bucket->clear();
   }
 }

@@ -227,6 +227,8 @@ class ContactDetector {
   void RefitEnabled(const PointsRef& obstacle_positions_m, const CollisionParameters& parameters,
                     const std::vector<int>& enabled_triangles);
   Box InflatedBox(const PointsRef& obstacle_positions_m, const CollisionParameters& parameters, int triangle) const;
+  // A node's box from its triangles' (leaf) or children's (internal) boxes.
+  void FitNode(int index);
   // Exact test of one triangle; appends to candidates_ when the pair qualifies.
   // max_depth_m: deepest gap accepted; previous_normal: unit normal of the node's previous
   // face (zero without history).
