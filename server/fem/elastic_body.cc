@@ -71,15 +71,14 @@ std::vector<int> OrderWithTrailing(const std::vector<int>& order, const std::vec
   return result;
 }
 
-// (L_TT L_TT^T)^-1 for the trailing m x m block L_TT of a supernodal factor whose last m
-// columns are T: the inverse of the Schur complement of T, which is (K^-1)_TT. Supernode t
-// holds columns super[t] .. super[t+1]-1 as a dense column-major nrows x ncols array at px[t],
-// rows listed at pi[t].
-Eigen::MatrixXd TrailingBlockInverse(const cholmod_factor& f, int m) {
+// Copies the trailing m x m block L_TT of a supernodal factor whose last m columns are T into
+// `out` (column-major, leading dimension ld; lower triangle only). Supernode t holds columns
+// super[t] .. super[t+1]-1 as a dense column-major nrows x ncols array at px[t], rows listed at
+// pi[t].
+void CopyTrailingBlock(const cholmod_factor& f, int m, double* out, std::ptrdiff_t ld) {
   HAPCO_ASSERT(f.is_super, "expected a supernodal factor");
   const int n = static_cast<int>(f.n);
   const int offset = n - m;
-  Eigen::MatrixXd inverse = Eigen::MatrixXd::Zero(m, m);
   const auto* super = static_cast<const int*>(f.super);
   const auto* pi = static_cast<const int*>(f.pi);
   const auto* px = static_cast<const int*>(f.px);
@@ -93,16 +92,20 @@ Eigen::MatrixXd TrailingBlockInverse(const cholmod_factor& f, int m) {
       const double* column = values + px[t] + static_cast<std::ptrdiff_t>(col - first_col) * nrows;
       for (int r = col - first_col; r < nrows; ++r) {
         const int row = rows[pi[t] + r];
-        if (row >= offset) inverse(row - offset, col - offset) = column[r];
+        if (row >= offset) out[(row - offset) + (col - offset) * ld] = column[r];
       }
     }
   }
+}
+
+// (L L^T)^-1 in place from the Cholesky factor L in the lower triangle of the m x m array `a`
+// (leading dimension m), then mirrored into the upper triangle.
+void InvertFromCholeskyFactor(double* a, int m) {
   int info = 0;
-  dpotri_("L", &m, inverse.data(), &m, &info);
+  dpotri_("L", &m, a, &m, &info);
   HAPCO_ASSERT(info == 0, "LAPACK dpotri failed on the contact nodes' Schur factor");
-  for (int c = 1; c < m; ++c)
-    for (int r = 0; r < c; ++r) inverse(r, c) = inverse(c, r);
-  return inverse;
+  for (std::ptrdiff_t c = 1; c < m; ++c)
+    for (std::ptrdiff_t r = 0; r < c; ++r) a[r + c * m] = a[c + r * m];
 }
 
 }  // namespace
@@ -249,6 +252,8 @@ ElasticBody::ElasticBody(Spec spec) : spec_(std::move(spec)) {
     }
     stats_.factorization_seconds = watch.ElapsedSeconds();
     stats_.factor_nonzeros = static_cast<long>(factor_->llt.cholmod().lnz);
+    const cholmod_factor& l = *factor_->llt.factor();
+    stats_.factor_bytes = sizeof(double) * l.xsize + sizeof(int) * (l.is_super ? l.ssize : l.nzmax);
   }
 
   unit_fields_ = Eigen::MatrixXd::Zero(dofs, 3);
@@ -333,8 +338,8 @@ Eigen::VectorXd ElasticBody::SolveDisplacement(const Eigen::VectorXd& nodal_forc
 Eigen::MatrixXd ElasticBody::ComplianceBlock(std::span<const int> nodes) const {
   CheckNodes(nodes, "compliance");
   const auto n = static_cast<Eigen::Index>(3 * nodes.size());
-  Eigen::MatrixXd c = Eigen::MatrixXd::Zero(n, n);
-  ComplianceColumns(nodes, [&c](int column, const Eigen::Ref<const Eigen::VectorXd>& values) { c.col(column) = values; });
+  Eigen::MatrixXd c(n, n);
+  ComplianceBlockInto(nodes, c.data());
   return c;
 }
 
@@ -365,10 +370,11 @@ Eigen::MatrixXd ElasticBody::ComplianceBlockBySolves(std::span<const int> nodes)
   return c;
 }
 
-void ElasticBody::ComplianceColumns(
-    std::span<const int> nodes, const std::function<void(int, const Eigen::Ref<const Eigen::VectorXd>&)>& sink) const {
+void ElasticBody::ComplianceBlockInto(std::span<const int> nodes, double* block_m_per_n) const {
   CheckNodes(nodes, "compliance");
   const int s = static_cast<int>(nodes.size());
+  const std::ptrdiff_t rows = 3 * static_cast<std::ptrdiff_t>(s);
+  std::fill(block_m_per_n, block_m_per_n + rows * rows, 0.0);
   const int nf = num_free_dofs();
   if (nf == 0 || s == 0) return;
   // Free dofs of the block, once each: S. A node listed twice gives the same columns twice.
@@ -394,15 +400,34 @@ void ElasticBody::ComplianceColumns(
   // m full solves with the factor (each O(nnz(L))), which at ~100k dofs and m ~ 2600 took two
   // minutes. The body's factor has its compliance_nodes last; if S is among them, (K^-1)_SS is
   // a sub-block of their inverse. Otherwise factor K_ff once more with S last.
-  Eigen::MatrixXd inverse;
-  std::vector<int> s_to_inverse(static_cast<std::size_t>(m));
   const std::vector<int>& trailing_index = factor_->trailing_index;
   const bool in_body_factor = std::all_of(s_to_free.begin(), s_to_free.end(), [&](int f) {
     return trailing_index[static_cast<std::size_t>(f)] >= 0;
   });
+  // Position of S's k-th dof in the inverted trailing block.
+  std::vector<int> s_to_inverse(static_cast<std::size_t>(m));
+  const int trailing = in_body_factor ? static_cast<int>(factor_->trailing.size()) : m;
+  for (int k = 0; k < m; ++k) {
+    s_to_inverse[static_cast<std::size_t>(k)] = in_body_factor ? trailing_index[static_cast<std::size_t>(s_to_free[static_cast<std::size_t>(k)])] : k;
+  }
+  // Where the block's free rows are exactly the trailing block in its order (the model's case:
+  // S is the body's compliance_nodes, no node twice), the inverse is computed in the caller's
+  // array and spread out in place: the peak memory is that array, not two m² arrays (the
+  // precomputation's peak at ~100k dofs, docs/free-interaction.md "Precomputation cost").
+  bool in_place = trailing == m;
+  for (int r = 0, next = 0; in_place && r < 3 * s; ++r) {
+    const int k = block_to_s[static_cast<std::size_t>(r)];
+    if (k < 0) continue;
+    in_place = s_to_inverse[static_cast<std::size_t>(k)] == next++;
+  }
+  Eigen::MatrixXd copy;  // the inverse otherwise
+  double* inverse = block_m_per_n;
+  if (!in_place) {
+    copy = Eigen::MatrixXd::Zero(trailing, trailing);
+    inverse = copy.data();
+  }
   if (in_body_factor) {
-    inverse = TrailingBlockInverse(*factor_->llt.factor(), static_cast<int>(factor_->trailing.size()));
-    for (int k = 0; k < m; ++k) s_to_inverse[static_cast<std::size_t>(k)] = trailing_index[static_cast<std::size_t>(s_to_free[static_cast<std::size_t>(k)])];
+    CopyTrailingBlock(*factor_->llt.factor(), trailing, inverse, trailing);
   } else {
     std::vector<int> perm = OrderWithTrailing(FreeDofOrder(), s_to_free, free_to_s);
     const Eigen::SparseMatrix<double> k_ff = FreeStiffnessLower();
@@ -419,19 +444,37 @@ void ElasticBody::ComplianceColumns(
     cholmod_factorize(&a, cholmod.factor, &cholmod.common);
     HAPCO_ASSERT(cholmod.common.status == CHOLMOD_OK && static_cast<int>(cholmod.factor->minor) == nf,
                  "CHOLMOD factorization with S last failed (the body factor succeeded)");
-    inverse = TrailingBlockInverse(*cholmod.factor, m);
-    for (int k = 0; k < m; ++k) s_to_inverse[static_cast<std::size_t>(k)] = k;
-  }
+    CopyTrailingBlock(*cholmod.factor, m, inverse, m);
+  }  // the second factor is freed before the inversion
+  InvertFromCholeskyFactor(inverse, trailing);
 
-  Eigen::VectorXd column = Eigen::VectorXd::Zero(3 * s);
-  for (int c = 0; c < 3 * s; ++c) {
+  if (in_place) {
+    // Spread the m x m inverse (leading dimension m) to 3s x 3s with zero Dirichlet rows and
+    // columns, from the last entry back: an entry's target index is never below its source
+    // index (both orders are the same, with gaps), so nothing is overwritten before it is read.
+    for (std::ptrdiff_t c = rows - 1; c >= 0; --c) {
+      const int kc = block_to_s[static_cast<std::size_t>(c)];
+      double* target = block_m_per_n + c * rows;
+      if (kc < 0) {
+        std::fill(target, target + rows, 0.0);
+        continue;
+      }
+      const double* source = block_m_per_n + static_cast<std::ptrdiff_t>(kc) * m;
+      for (std::ptrdiff_t r = rows - 1; r >= 0; --r) {
+        const int kr = block_to_s[static_cast<std::size_t>(r)];
+        target[r] = kr < 0 ? 0.0 : source[kr];
+      }
+    }
+    return;
+  }
+  for (std::ptrdiff_t c = 0; c < rows; ++c) {
     const int sc = block_to_s[static_cast<std::size_t>(c)];
     if (sc < 0) continue;
-    for (int r = 0; r < 3 * s; ++r) {
+    const std::ptrdiff_t ic = s_to_inverse[static_cast<std::size_t>(sc)];
+    for (std::ptrdiff_t r = 0; r < rows; ++r) {
       const int sr = block_to_s[static_cast<std::size_t>(r)];
-      column[r] = sr < 0 ? 0.0 : inverse(s_to_inverse[static_cast<std::size_t>(sr)], s_to_inverse[static_cast<std::size_t>(sc)]);
+      block_m_per_n[r + c * rows] = sr < 0 ? 0.0 : copy(s_to_inverse[static_cast<std::size_t>(sr)], ic);
     }
-    sink(c, column);
   }
 }
 

@@ -17,6 +17,9 @@ struct ElasticBodyStats {
   double factorization_seconds = 0.0;  // CHOLMOD analyse + numeric factorization of K_ff, s
   long stiffness_nonzeros = 0;         // stored entries of the full 3N x 3N K
   long factor_nonzeros = 0;            // nonzeros of the Cholesky factor L (CHOLMOD lnz)
+  // Memory of L's values and row indices, bytes. Supernodes are stored as dense rectangles, so
+  // with compliance_nodes last this includes their full m x m Schur factor (8 m² bytes).
+  std::size_t factor_bytes = 0;
   int free_dofs = 0;                   // size of K_ff
 };
 
@@ -80,17 +83,16 @@ class ElasticBody {
   // complement of the free dofs of S (the trailing block of a Cholesky factor with S ordered
   // last, inverted with LAPACK dpotri): O(m^3) for m free dofs in S when S is within
   // Spec::compliance_nodes (the body's factor already has them last), else one more CHOLMOD
-  // factorization first; a transient dense m x m array (8 m^2 bytes) either way.
+  // factorization first.
   Eigen::MatrixXd ComplianceBlock(std::span<const int> nodes) const;
   // The same block by 3|S| batched solves with the body's factor (the method before the Schur
   // complement one): O(|S| nnz(L)). Kept as the baseline of fem_bench and a second, independent
   // computation for the tests; the simulation uses ComplianceBlock.
   Eigen::MatrixXd ComplianceBlockBySolves(std::span<const int> nodes) const;
-  // The same block a column at a time, for callers that store it in their own layout without
-  // a dense copy: sink(c, column) receives each column c (0 <= c < 3|S|, length 3|S|) once;
-  // columns of Dirichlet dofs are never sent (they are zero).
-  void ComplianceColumns(std::span<const int> nodes,
-                         const std::function<void(int, const Eigen::Ref<const Eigen::VectorXd>&)>& sink) const;
+  // The same block written into the caller's array (column-major, 3|S| x 3|S|, 9|S|² doubles),
+  // which also holds the inversion's work when S is the body's compliance_nodes in that order:
+  // then the precomputation's peak is that array and the factor, with no second dense copy.
+  void ComplianceBlockInto(std::span<const int> nodes, double* block_m_per_n) const;
 
   // Sum over `nodes` of (K U - f): the force (N) the supports exert on those nodes. For free
   // nodes of an equilibrium solution this is zero to round-off.

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <new>
+#include <vector>
 
 #include "common/error.h"
 
@@ -35,20 +36,29 @@ void CompliancePagesUnmapper::operator()(double* memory) const {
 }
 
 BlockedCompliance::BlockedCompliance(const Eigen::MatrixXd& compliance_m_per_n)
-    : BlockedCompliance(static_cast<int>(compliance_m_per_n.cols() / 3)) {
-  HAPCO_ASSERT(compliance_m_per_n.rows() == compliance_m_per_n.cols() && compliance_m_per_n.rows() % 3 == 0,
-               "BlockedCompliance: C must be square with 3 rows per node");
-  for (Eigen::Index c = 0; c < compliance_m_per_n.cols(); ++c) SetColumn(static_cast<int>(c), compliance_m_per_n.col(c));
-}
+    : BlockedCompliance(FromDenseInPlace(static_cast<int>(compliance_m_per_n.cols() / 3), [&](double* dense) {
+        HAPCO_ASSERT(compliance_m_per_n.rows() == compliance_m_per_n.cols() && compliance_m_per_n.rows() % 3 == 0,
+                     "BlockedCompliance: C must be square with 3 rows per node");
+        std::copy(compliance_m_per_n.data(), compliance_m_per_n.data() + compliance_m_per_n.size(), dense);
+      })) {}
 
-void BlockedCompliance::SetColumn(int column, const Eigen::Ref<const Eigen::VectorXd>& values_m_per_n) {
-  HAPCO_ASSERT(column >= 0 && column < 3 * nodes_ && values_m_per_n.size() == 3 * nodes_,
-               "BlockedCompliance::SetColumn: column or length out of range");
-  const int j = column / 3, b = column % 3;
-  for (int i = 0; i < nodes_; ++i) {
-    double* block = data_.get() + Offset(i, j);
-    for (int a = 0; a < 3; ++a) block[3 * b + a] = values_m_per_n[3 * i + a];
+BlockedCompliance BlockedCompliance::FromDenseInPlace(int nodes,
+                                                      const std::function<void(double* dense_m_per_n)>& write_dense) {
+  BlockedCompliance c(nodes);
+  write_dense(c.data_.get());
+  // The columns 3j..3j+2 of the dense array and the blocks (·, j) occupy the same 9n doubles
+  // (at 9jn): dense (3i + a, 3j + b) at 9jn + 3n·b + 3i + a, block (i, j) entry (a, b) at
+  // 9jn + 9i + 3b + a. So each column triple is reordered on its own, through a 9n buffer.
+  const auto n = static_cast<std::size_t>(nodes);
+  std::vector<double> triple(9 * n);
+  for (std::size_t j = 0; j < n; ++j) {
+    double* column = c.data_.get() + 9 * j * n;
+    std::copy(column, column + 9 * n, triple.begin());
+    for (std::size_t i = 0; i < n; ++i)
+      for (std::size_t b = 0; b < 3; ++b)
+        for (std::size_t a = 0; a < 3; ++a) column[9 * i + 3 * b + a] = triple[3 * n * b + 3 * i + a];
   }
+  return c;
 }
 
 Eigen::MatrixXd BlockedCompliance::ToDense() const {

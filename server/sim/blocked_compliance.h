@@ -1,6 +1,7 @@
 #pragma once
 
 #include <cstddef>
+#include <functional>
 #include <memory>
 
 #include <Eigen/Dense>
@@ -26,13 +27,14 @@ struct CompliancePagesUnmapper {
 class BlockedCompliance {
  public:
   BlockedCompliance() = default;
-  // n x n zero blocks (n nodes); fill with SetColumn.
+  // n x n zero blocks (n nodes).
   explicit BlockedCompliance(int nodes);
   // From a dense 3n x 3n compliance (tests, small bodies).
   explicit BlockedCompliance(const Eigen::MatrixXd& compliance_m_per_n);
-
-  // Column c = 3j + b of C (length 3n): the blocks (·, j), column b.
-  void SetColumn(int column, const Eigen::Ref<const Eigen::VectorXd>& values_m_per_n);
+  // n nodes; write_dense(p) writes C as a dense 3n x 3n column-major array at p (9n² doubles:
+  // this object's own storage), which is then reordered into blocks in place. For a large C
+  // this is the only 72 n²-byte array: no dense copy beside the blocks.
+  static BlockedCompliance FromDenseInPlace(int nodes, const std::function<void(double* dense_m_per_n)>& write_dense);
 
   int nodes() const { return nodes_; }
   std::size_t bytes() const { return sizeof(double) * 9 * static_cast<std::size_t>(nodes_) * static_cast<std::size_t>(nodes_); }

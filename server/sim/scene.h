@@ -89,7 +89,8 @@ std::string DescribeOverLimit(const fem::Mesh& mesh, const BodyBuildEstimate& es
 std::string DescribeOverLimit(const fem::BoxMeshSpec& box, const BodyBuildEstimate& estimate);
 
 // A body whose estimate exceeds this is refused before it is built (a scene file cannot ask
-// for more memory than a server has; the dense contact operators have the same 4 GiB bound).
+// for more memory than a server has; the dense contact operators are checked against the
+// memory available, TwoBodyModel).
 inline constexpr double kMaxBodyBuildBytes = 4.0 * 1024 * 1024 * 1024;
 
 // The largest trajectory a scene may describe (steps over all phases), so that step counts

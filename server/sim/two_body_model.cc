@@ -9,6 +9,7 @@
 #include <utility>
 
 #include "common/error.h"
+#include "common/memory.h"
 #include "common/timer.h"
 
 namespace hapco::sim {
@@ -116,11 +117,10 @@ ContactSurface DescribeSurface(const fem::Mesh& mesh, std::vector<fem::SurfaceTr
 }
 
 void ComputeCompliance(const fem::ElasticBody& body, ContactSurface* surface) {
-  // Column by column into the blocked layout: no dense copy, so the peak is the operator.
-  surface->compliance_m_per_n = BlockedCompliance(static_cast<int>(surface->nodes.size()));
-  body.ComplianceColumns(surface->nodes, [surface](int column, const Eigen::Ref<const Eigen::VectorXd>& values) {
-    surface->compliance_m_per_n.SetColumn(column, values);
-  });
+  // Computed in the blocked layout's own storage and reordered there: the precomputation's
+  // peak is the operator (and the body's factor), not the operator twice.
+  surface->compliance_m_per_n = BlockedCompliance::FromDenseInPlace(
+      static_cast<int>(surface->nodes.size()), [&](double* dense) { body.ComplianceBlockInto(surface->nodes, dense); });
   // Cells of about two face sizes: fine enough that a clamped end's cells get small bounds,
   // coarse enough that the per-step bound costs cells x loaded nodes, not nodes x nodes.
   const auto& mesh = body.mesh();
@@ -171,7 +171,36 @@ struct TwoBodyModel::Parts {
   fem::ElasticBody obstacle, tool;
 };
 
-TwoBodyModel::Parts TwoBodyModel::MakeParts(SceneSpec scene) {
+namespace {
+
+// Refuses, before either body is factored, a scene whose dense compliance cannot be held. The
+// blocks take 72 n² bytes per surface of n nodes, and each body's factor keeps the Schur factor
+// of its surface's dofs (8 m², m <= 3n free dofs) as a dense trailing block beside them, so
+// the model needs about twice the blocks (docs/free-interaction.md "Precomputation cost").
+void CheckOperatorsFit(std::size_t obstacle_nodes, std::size_t tool_nodes, std::size_t max_operator_bytes) {
+  const auto dense_bytes = [](std::size_t nodes) { return sizeof(double) * 9 * nodes * nodes; };
+  const std::size_t operators = dense_bytes(obstacle_nodes) + dense_bytes(tool_nodes);
+  std::size_t limit = max_operator_bytes;
+  std::string limit_source = "the given limit";
+  if (max_operator_bytes == TwoBodyModel::kOperatorsWithinAvailableMemory) {
+    const std::optional<std::size_t> available = AvailableMemoryBytes();
+    if (!available) return;  // nothing to judge by: let the allocation decide
+    limit = *available / 2;
+    limit_source = "half of the " + std::to_string(*available >> 20) +
+                   " MiB this machine (or container) has available, as the factors hold as much again";
+  }
+  if (operators <= limit) return;
+  std::ostringstream message;
+  message << "the dense compliance of the contact surfaces would need " << operators / double(1 << 20) << " MiB ("
+          << obstacle_nodes << " obstacle + " << tool_nodes << " tool surface nodes, 72·n² bytes each), above "
+          << limit_source << " (" << limit / double(1 << 20)
+          << " MiB): use fewer divisions, a smaller contact.reach_m, or Tet4 elements";
+  throw InputError(message.str());
+}
+
+}  // namespace
+
+TwoBodyModel::Parts TwoBodyModel::MakeParts(SceneSpec scene, std::size_t max_operator_bytes) {
   if (!(std::isfinite(scene.reach_m) && scene.reach_m > 0.0)) {
     throw InputError("scene reach_m must be a finite distance > 0 m, got " + std::to_string(scene.reach_m));
   }
@@ -212,15 +241,16 @@ TwoBodyModel::Parts TwoBodyModel::MakeParts(SceneSpec scene) {
   }
   std::vector<int> obstacle_candidates = FaceNodes(reachable);
   std::vector<int> tool_candidates = FaceNodes(tool_faces);
+  CheckOperatorsFit(obstacle_candidates.size(), tool_candidates.size(), max_operator_bytes);
   fem::ElasticBody obstacle = BuildBody(scene.obstacle, std::move(obstacle_mesh), std::move(obstacle_candidates));
   fem::ElasticBody tool = BuildBody(scene.tool, std::move(tool_mesh), std::move(tool_candidates));
   return Parts{std::move(scene), std::move(reachable), std::move(tool_faces), std::move(obstacle), std::move(tool)};
 }
 
 TwoBodyModel::TwoBodyModel(SceneSpec scene, std::size_t max_operator_bytes)
-    : TwoBodyModel(MakeParts(std::move(scene)), max_operator_bytes) {}
+    : TwoBodyModel(MakeParts(std::move(scene), max_operator_bytes)) {}
 
-TwoBodyModel::TwoBodyModel(Parts parts, std::size_t max_operator_bytes)
+TwoBodyModel::TwoBodyModel(Parts parts)
     : scene_(std::move(parts.scene)), obstacle_(std::move(parts.obstacle)), tool_(std::move(parts.tool)) {
   Stopwatch total;
   stats_.build_seconds = obstacle_.stats().assembly_seconds + obstacle_.stats().factorization_seconds +
@@ -266,17 +296,6 @@ TwoBodyModel::TwoBodyModel(Parts parts, std::size_t max_operator_bytes)
     }
   }
 
-  const auto dense_bytes = [](std::size_t nodes) { return sizeof(double) * 9 * nodes * nodes; };
-  const std::size_t estimate =
-      dense_bytes(obstacle_surface_.nodes.size()) + dense_bytes(tool_surface_.nodes.size());
-  if (estimate > max_operator_bytes) {
-    std::ostringstream message;
-    message << "the dense compliance of the contact surfaces would need " << estimate / double(1 << 20)
-            << " MiB (" << obstacle_surface_.nodes.size() << " obstacle + " << tool_surface_.nodes.size()
-            << " tool surface nodes, 72·n² bytes each), above the limit of " << max_operator_bytes / double(1 << 20)
-            << " MiB: use fewer divisions, a smaller contact.reach_m, or Tet4 elements";
-    throw InputError(message.str());
-  }
   Stopwatch compliance;
   ComputeCompliance(obstacle_, &obstacle_surface_);
   ComputeCompliance(tool_, &tool_surface_);

@@ -6,7 +6,8 @@
 //   - the obstacle's contact surface: every boundary face within `SceneSpec::reach_m` of the
 //     tool's home box (top, sides, ends, bottom: the user moves freely);
 //   - the tool's contact surface: all of its boundary;
-//   - the dense compliance K⁻¹ among each surface's nodes (batched CHOLMOD solves), with a
+//   - the dense compliance K⁻¹ among each surface's nodes (the inverse of their Schur
+//     complement, which the body's factor holds last: ElasticBody::ComplianceBlockInto), with a
 //     per-node bound on how far a unit force there can move any surface node (the step's
 //     broad phase uses it to know which part of the obstacle can be near the tool);
 //   - the tool's free displacement at its surface nodes per unit device translation;
@@ -74,15 +75,17 @@ struct TwoBodyModelStats {
 
 class TwoBodyModel {
  public:
-  // The dense compliance blocks grow as (3n)² in the surface node count n: a scene whose
-  // blocks would need more than this is refused before anything is allocated, bytes.
-  static constexpr std::size_t kDefaultMaxOperatorBytes = std::size_t{4} << 30;  // 4 GiB
+  // The dense compliance blocks grow as (3n)² in the surface node count n (72 n² bytes), and
+  // the bodies' factors hold about as much again: by default a scene is refused, before
+  // either body is factored, when its blocks exceed half of the memory this process can still
+  // take (AvailableMemoryBytes: the machine's, or its container's limit).
+  static constexpr std::size_t kOperatorsWithinAvailableMemory = 0;
 
   // Throws InputError when the scene cannot be built (see BuildBody), no obstacle face is
   // within reach, the tool starts inside the obstacle (the message names the depth), or the
-  // dense operators would exceed max_operator_bytes (the message gives the estimate and how
-  // to shrink it).
-  explicit TwoBodyModel(SceneSpec scene, std::size_t max_operator_bytes = kDefaultMaxOperatorBytes);
+  // dense operators would exceed max_operator_bytes, bytes (the message gives the estimate
+  // and how to shrink it).
+  explicit TwoBodyModel(SceneSpec scene, std::size_t max_operator_bytes = kOperatorsWithinAvailableMemory);
 
   const SceneSpec& scene() const { return scene_; }
   const fem::ElasticBody& obstacle() const { return obstacle_; }
@@ -130,8 +133,8 @@ class TwoBodyModel {
 
  private:
   struct Parts;  // the scene, its bodies and their candidate faces, made before the members
-  static Parts MakeParts(SceneSpec scene);
-  TwoBodyModel(Parts parts, std::size_t max_operator_bytes);
+  static Parts MakeParts(SceneSpec scene, std::size_t max_operator_bytes);
+  explicit TwoBodyModel(Parts parts);
 
   SceneSpec scene_;
   fem::ElasticBody obstacle_;

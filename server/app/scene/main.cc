@@ -125,8 +125,8 @@ int Run(const Options& options) {
     std::printf("          quadratic faces searched on %s (contact.quadratic_face_search)\n",
                 scene.quadratic_face_subtriangles ? "their four sub-triangles through the midside nodes"
                                                   : "the flat triangle of their corners");
-    std::printf("precomputed, %.2f s (compliance %.2f s, batched CHOLMOD solves):\n", watch.ElapsedSeconds(),
-                model.stats().compliance_seconds);
+    std::printf("precomputed, %.2f s (compliance %.2f s: each surface's Schur complement, inverted):\n",
+                watch.ElapsedSeconds(), model.stats().compliance_seconds);
     const auto largest_diagonal = [](const hapco::sim::BlockedCompliance& c) {
       double largest = 0.0;
       for (int i = 0; i < c.nodes(); ++i) largest = std::max(largest, c.block(i, i).diagonal().maxCoeff());
@@ -141,6 +141,10 @@ int Run(const Options& options) {
                 "compliance %.3g m/N\n",
                 mib(model.stats().operator_bytes), largest_diagonal(o.compliance_m_per_n),
                 model.rigid_contact_compliance_m_per_n());
+    std::printf("          the model's factors hold %.1f MiB more (obstacle %.1f MiB, with its surface's dense "
+                "Schur factor; kept for full solves and field export)\n",
+                mib(model.obstacle().stats().factor_bytes + model.tool().stats().factor_bytes),
+                mib(model.obstacle().stats().factor_bytes));
     std::printf("          the step reads them with the %s compliance kernels (this CPU's fastest; "
                 "sim/compliance_kernels.h)\n",
                 hapco::sim::ComplianceKernelName(hapco::sim::FastestComplianceKernel()));
