@@ -251,9 +251,7 @@ ElasticBody::ElasticBody(Spec spec) : spec_(std::move(spec)) {
                        "a face, not one or two nodes)");
     }
     stats_.factorization_seconds = watch.ElapsedSeconds();
-    stats_.factor_nonzeros = static_cast<long>(factor_->llt.cholmod().lnz);
-    const cholmod_factor& l = *factor_->llt.factor();
-    stats_.factor_bytes = sizeof(double) * l.xsize + sizeof(int) * (l.is_super ? l.ssize : l.nzmax);
+    RecordFactorSize();
   }
 
   unit_fields_ = Eigen::MatrixXd::Zero(dofs, 3);
@@ -280,6 +278,27 @@ Eigen::SparseMatrix<double> ElasticBody::FreeStiffnessLower() const {
   Eigen::SparseMatrix<double> k_ff(num_free_dofs(), num_free_dofs());
   k_ff.setFromTriplets(entries.begin(), entries.end());
   return k_ff;
+}
+
+void ElasticBody::RecordFactorSize() {
+  stats_.factor_nonzeros = static_cast<long>(factor_->llt.cholmod().lnz);
+  const cholmod_factor& l = *factor_->llt.factor();
+  stats_.factor_bytes = sizeof(double) * l.xsize + sizeof(int) * (l.is_super ? l.ssize : l.nzmax);
+  const std::size_t m = factor_->trailing.size();
+  stats_.schur_factor_bytes = sizeof(double) * m * m;
+}
+
+void ElasticBody::ReleaseComplianceOrder() {
+  if (factor_ == nullptr || factor_->trailing.empty()) return;
+  Stopwatch watch;
+  const Eigen::SparseMatrix<double> k_ff = FreeStiffnessLower();
+  factor_.reset();  // first, so the two factors never coexist
+  factor_ = std::make_unique<Factor>();
+  factor_->trailing_index.assign(static_cast<std::size_t>(num_free_dofs()), -1);
+  factor_->llt.compute(k_ff);
+  HAPCO_ASSERT(factor_->llt.info() == Eigen::Success, "CHOLMOD refactorization of K_ff failed (the first one succeeded)");
+  stats_.factorization_seconds += watch.ElapsedSeconds();
+  RecordFactorSize();
 }
 
 Eigen::MatrixXd ElasticBody::SolveFree(const Eigen::MatrixXd& rhs_free) const {

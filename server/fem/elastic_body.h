@@ -20,6 +20,8 @@ struct ElasticBodyStats {
   // Memory of L's values and row indices, bytes. Supernodes are stored as dense rectangles, so
   // with compliance_nodes last this includes their full m x m Schur factor (8 m² bytes).
   std::size_t factor_bytes = 0;
+  // Of which the dense Schur factor of the compliance_nodes' m free dofs: 8 m² bytes.
+  std::size_t schur_factor_bytes = 0;
   int free_dofs = 0;                   // size of K_ff
 };
 
@@ -94,6 +96,13 @@ class ElasticBody {
   // then the precomputation's peak is that array and the factor, with no second dense copy.
   void ComplianceBlockInto(std::span<const int> nodes, double* block_m_per_n) const;
 
+  // Factors K_ff again in CHOLMOD's own fill-reducing order, without compliance_nodes last, and
+  // frees the factor that had them: their dense Schur factor (stats().schur_factor_bytes) is
+  // needed only to compute their compliance block, and on a large contact surface it is as
+  // large as that block. Solves afterwards differ by round-off; ComplianceBlock still works
+  // (it factors with its nodes last once more). Costs one factorization without the dense block.
+  void ReleaseComplianceOrder();
+
   // Sum over `nodes` of (K U - f): the force (N) the supports exert on those nodes. For free
   // nodes of an equilibrium solution this is zero to round-off.
   Eigen::Vector3d ReactionForce(const Eigen::VectorXd& displacement_m,
@@ -106,6 +115,7 @@ class ElasticBody {
   struct Factor;  // CHOLMOD solver, hidden so users need not include CHOLMOD headers
 
   void CheckNodes(std::span<const int> nodes, const char* what) const;
+  void RecordFactorSize();  // stats_ from factor_
   void CheckRigidMotionsStopped() const;
   // K_ff (free dofs only, lower triangle stored), N/m.
   Eigen::SparseMatrix<double> FreeStiffnessLower() const;

@@ -173,6 +173,8 @@ struct TwoBodyModel::Parts {
 
 namespace {
 
+constexpr std::size_t kReleaseSchurFactorAboveBytes = std::size_t{512} << 20;
+
 // Refuses, before either body is factored, a scene whose dense compliance cannot be held. The
 // blocks take 72 n² bytes per surface of n nodes, and each body's factor keeps the Schur factor
 // of its surface's dofs (8 m², m <= 3n free dofs) as a dense trailing block beside them, so
@@ -300,6 +302,14 @@ TwoBodyModel::TwoBodyModel(Parts parts)
   ComputeCompliance(obstacle_, &obstacle_surface_);
   ComputeCompliance(tool_, &tool_surface_);
   stats_.compliance_seconds = compliance.ElapsedSeconds();
+  // A large surface's dense Schur factor stays in its body's factor as large as its compliance
+  // blocks, for nothing the step needs: factor once more without it (ElasticBody::
+  // ReleaseComplianceOrder). Smaller ones are kept: there the refactorization would cost more
+  // time than the memory is worth (the shipped scenes' are 0.3-250 MiB, and their
+  // precomputation is mostly the factorization).
+  for (fem::ElasticBody* body : {&obstacle_, &tool_}) {
+    if (body->stats().schur_factor_bytes > kReleaseSchurFactorAboveBytes) body->ReleaseComplianceOrder();
+  }
   rigid_contact_compliance_m_per_n_ = std::numeric_limits<double>::infinity();
   for (const ContactSurface* surface : {&obstacle_surface_, &tool_surface_}) {
     const BlockedCompliance& c = surface->compliance_m_per_n;

@@ -141,10 +141,12 @@ int Run(const Options& options) {
                 "compliance %.3g m/N\n",
                 mib(model.stats().operator_bytes), largest_diagonal(o.compliance_m_per_n),
                 model.rigid_contact_compliance_m_per_n());
-    std::printf("          the model's factors hold %.1f MiB more (obstacle %.1f MiB, with its surface's dense "
-                "Schur factor; kept for full solves and field export)\n",
-                mib(model.obstacle().stats().factor_bytes + model.tool().stats().factor_bytes),
-                mib(model.obstacle().stats().factor_bytes));
+    const auto& obstacle_factor = model.obstacle().stats();
+    std::printf("          the bodies' factors (kept for full solves and field export) hold %.1f MiB more: obstacle "
+                "%.1f MiB, %s\n",
+                mib(obstacle_factor.factor_bytes + model.tool().stats().factor_bytes), mib(obstacle_factor.factor_bytes),
+                obstacle_factor.schur_factor_bytes > 0 ? "with its surface's dense Schur factor last"
+                                                      : "refactored without its surface's dense Schur factor");
     std::printf("          the step reads them with the %s compliance kernels (this CPU's fastest; "
                 "sim/compliance_kernels.h)\n",
                 hapco::sim::ComplianceKernelName(hapco::sim::FastestComplianceKernel()));

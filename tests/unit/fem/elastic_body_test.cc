@@ -183,6 +183,35 @@ TEST_P(ElasticBodyTest, ComplianceNodesOrderedLastChangeNoResult) {
   }
 }
 
+// Releasing the compliance order frees the dense Schur factor and keeps every answer: solves
+// (against the body factored without it from the start) and compliance blocks (against solves).
+TEST_P(ElasticBodyTest, ReleasingTheComplianceOrderKeepsSolvesAndBlocks) {
+  const Scene plain = MakeScene(GetParam(), true);
+  const std::vector<int> top = NodesOnBoxFace(plain.body.mesh(), plain.spec, BoxFace::kZMax);
+  ElasticBody::Spec s;
+  s.mesh = plain.body.mesh();
+  s.material = kRed;
+  s.clamped_nodes = plain.body.clamped_nodes();
+  s.driven_nodes = plain.body.driven_nodes();
+  s.compliance_nodes = top;
+  ElasticBody body(std::move(s));
+  const Eigen::MatrixXd before = body.ComplianceBlock(top);
+  const std::size_t free_top_dofs = static_cast<std::size_t>(before.diagonal().count());
+  EXPECT_EQ(body.stats().schur_factor_bytes, sizeof(double) * free_top_dofs * free_top_dofs);
+  const std::size_t bytes_with_schur = body.stats().factor_bytes;
+
+  body.ReleaseComplianceOrder();
+  EXPECT_EQ(body.stats().schur_factor_bytes, 0u);
+  EXPECT_LT(body.stats().factor_bytes, bytes_with_schur);
+  EXPECT_EQ(body.stats().factor_nonzeros, plain.body.stats().factor_nonzeros) << "CHOLMOD's own order, as without compliance nodes";
+  const Eigen::VectorXd f = RandomLoads(plain.body.num_dofs(), 13);
+  const Eigen::Vector3d drive(-2e-4, 1e-4, -1e-4);
+  const Eigen::VectorXd u_plain = plain.body.SolveDisplacement(f, drive);
+  EXPECT_LE((body.SolveDisplacement(f, drive) - u_plain).cwiseAbs().maxCoeff(), 1e-10 * u_plain.cwiseAbs().maxCoeff());
+  const Eigen::MatrixXd after = body.ComplianceBlock(top);
+  EXPECT_LE((after - before).cwiseAbs().maxCoeff(), 1e-10 * before.cwiseAbs().maxCoeff());
+}
+
 TEST_P(ElasticBodyTest, ReactionsBalanceTheAppliedLoads) {
   const Scene scene = MakeScene(GetParam(), true);
   const ElasticBody& body = scene.body;
