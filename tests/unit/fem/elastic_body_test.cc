@@ -147,6 +147,17 @@ TEST_P(ElasticBodyTest, SchurComplementBlockMatchesBatchedSolves) {
   EXPECT_GT(body.ComplianceBlock(every).norm(), 0.0);
 }
 
+// The body of `plain` again, its factor with the dofs of `nodes` last.
+ElasticBody WithComplianceNodes(const Scene& plain, const std::vector<int>& nodes) {
+  ElasticBody::Spec s;
+  s.mesh = plain.body.mesh();
+  s.material = kRed;
+  s.clamped_nodes = plain.body.clamped_nodes();
+  s.driven_nodes = plain.body.driven_nodes();
+  s.compliance_nodes = nodes;
+  return ElasticBody(std::move(s));
+}
+
 // A body built with compliance nodes (its factor orders their dofs last) must solve and give
 // compliance blocks exactly as one factored in CHOLMOD's own order: for the listed nodes, a
 // subset of them (read off the same factor) and a set beyond them (a second factorization).
@@ -155,13 +166,7 @@ TEST_P(ElasticBodyTest, ComplianceNodesOrderedLastChangeNoResult) {
   std::vector<int> top = NodesOnBoxFace(plain.body.mesh(), plain.spec, BoxFace::kZMax);
   std::mt19937 rng(5);
   std::shuffle(top.begin(), top.end(), rng);
-  ElasticBody::Spec s;
-  s.mesh = plain.body.mesh();
-  s.material = kRed;
-  s.clamped_nodes = plain.body.clamped_nodes();
-  s.driven_nodes = plain.body.driven_nodes();
-  s.compliance_nodes = top;
-  const ElasticBody ordered(std::move(s));
+  const ElasticBody ordered = WithComplianceNodes(plain, top);
 
   const Eigen::VectorXd f = RandomLoads(plain.body.num_dofs(), 11);
   const Eigen::Vector3d drive(1e-4, -2e-4, -3e-4);
@@ -188,13 +193,7 @@ TEST_P(ElasticBodyTest, ComplianceNodesOrderedLastChangeNoResult) {
 TEST_P(ElasticBodyTest, ReleasingTheComplianceOrderKeepsSolvesAndBlocks) {
   const Scene plain = MakeScene(GetParam(), true);
   const std::vector<int> top = NodesOnBoxFace(plain.body.mesh(), plain.spec, BoxFace::kZMax);
-  ElasticBody::Spec s;
-  s.mesh = plain.body.mesh();
-  s.material = kRed;
-  s.clamped_nodes = plain.body.clamped_nodes();
-  s.driven_nodes = plain.body.driven_nodes();
-  s.compliance_nodes = top;
-  ElasticBody body(std::move(s));
+  ElasticBody body = WithComplianceNodes(plain, top);
   const Eigen::MatrixXd before = body.ComplianceBlock(top);
   const std::size_t free_top_dofs = static_cast<std::size_t>(before.diagonal().count());
   EXPECT_EQ(body.stats().schur_factor_bytes, sizeof(double) * free_top_dofs * free_top_dofs);
