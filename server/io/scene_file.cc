@@ -372,6 +372,11 @@ class SceneChecker {
       case pb::FOUR_SUBTRIANGLES: spec->quadratic_face_subtriangles = true; break;
       default: Fail("contact", contact, tree, "quadratic_face_search", "must be CORNER_TRIANGLE or FOUR_SUBTRIANGLES");
     }
+    switch (contact.reverse_pass_slaves()) {
+      case pb::SHARP_EDGE_NODES: spec->reverse_pass_all_nodes = false; break;
+      case pb::ALL_SURFACE_NODES: spec->reverse_pass_all_nodes = true; break;
+      default: Fail("contact", contact, tree, "reverse_pass_slaves", "must be SHARP_EDGE_NODES or ALL_SURFACE_NODES");
+    }
   }
 
   void CheckSolver(const pb::Scene& scene, sim::SceneSpec* spec) const {

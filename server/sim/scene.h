@@ -54,6 +54,9 @@ struct SceneSpec {
   // Pair nodes with a 6-node face on its four flat sub-triangles (through the midside nodes)
   // instead of the flat triangle of its corners (scene.proto QuadraticFaceSearch).
   bool quadratic_face_subtriangles = false;
+  // Every obstacle candidate node is a reverse-pass slave (against the tool's faces), not only
+  // those on its sharp edges (scene.proto ReversePassSlaves).
+  bool reverse_pass_all_nodes = false;
   contact::SolverKind solver = contact::SolverKind::kLocalUzawa;
   contact::SolverParameters solver_parameters;
   std::vector<TrajectoryPhase> trajectory;

@@ -329,20 +329,23 @@ void TwoBodySession::DetectContacts(const Eigen::Vector3d& device_translation_m)
   }
   const int tool_node_count = model_.tool().mesh().num_nodes();
   const auto& tool_reference = model_.tool().mesh().nodes_m;
+  const bool all_obstacle_nodes_are_slaves = model_.scene().reverse_pass_all_nodes;
   for (const ContactPoint& p : edge_pass_points_) {
     edge_previous_triangle_[static_cast<std::size_t>(p.node_slot)] = p.obstacle_triangle;
     const auto triangle = static_cast<std::size_t>(p.obstacle_triangle);
     const fem::SurfaceTriangle& face = tool_surface_.triangles[triangle];
-    // On a sharp edge of the tool, or on a tool node in contact: pass 1 already has it (the
+    // On a tool node in contact: pass 1 already has it. With the sharp-edge slaves only, also
+    // on a sharp edge of the tool, where the tool's rim nodes are taken to hold it (the
     // benchmarks' tool is exactly as wide as the bar, so the bar's long edges lie on the
-    // tool's rim). Judged rigidly: reference positions, the tool translated by d.
+    // tool's rim); a full second pass keeps those, since the obstacle's nodes there may lie
+    // between the tool's. Judged rigidly: reference positions, the tool translated by d.
     const Eigen::Vector3d rigid = ProjectionBarycentric(
         model_.obstacle().mesh().nodes_m.row(p.tool_node).transpose(),
         tool_reference.row(face.corners[0]).transpose() + device_translation_m,
         tool_reference.row(face.corners[1]).transpose() + device_translation_m,
         tool_reference.row(face.corners[2]).transpose() + device_translation_m);
     bool covered = false;
-    for (int k = 0; k < 3; ++k) {
+    for (int k = 0; k < 3 && !all_obstacle_nodes_are_slaves; ++k) {
       covered = covered || (tool_surface_.sharp_edges[triangle][static_cast<std::size_t>(k)] && rigid[(k + 2) % 3] < kOnEdge);
     }
     int corner = 0;

@@ -263,8 +263,9 @@ TwoBodyModel::TwoBodyModel(Parts parts)
   tool_thickness_m_ = SmallestExtent(tool_mesh);
   obstacle_surface_ = DescribeSurface(obstacle_mesh, std::move(parts.obstacle_faces), scene_.quadratic_face_subtriangles);
   tool_surface_ = DescribeSurface(tool_mesh, std::move(parts.tool_faces), scene_.quadratic_face_subtriangles);
+  // Reverse-pass slaves: the sharp-edge nodes, or every candidate node (full two-pass).
   for (std::size_t i = 0; i < obstacle_surface_.nodes.size(); ++i) {
-    if (obstacle_surface_.on_sharp_edge[i]) {
+    if (scene_.reverse_pass_all_nodes || obstacle_surface_.on_sharp_edge[i]) {
       obstacle_edge_nodes_.push_back(obstacle_surface_.nodes[i]);
       obstacle_edge_normals_.push_back(obstacle_surface_.node_normals[i]);
     }

@@ -107,7 +107,8 @@ class TwoBodyModel {
 
   // Obstacle nodes on sharp edges and corners (ids, sorted) with their normals: the slaves of
   // the reverse pass (obstacle node against tool face), which catches an obstacle edge or
-  // corner pressing into a flat tool face where no tool node is.
+  // corner pressing into a flat tool face where no tool node is. With the scene's
+  // reverse_pass_slaves ALL_SURFACE_NODES: every obstacle candidate node.
   const std::vector<int>& obstacle_edge_nodes() const { return obstacle_edge_nodes_; }
   const std::vector<Eigen::Vector3d>& obstacle_edge_normals() const { return obstacle_edge_normals_; }
 

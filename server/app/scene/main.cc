@@ -119,9 +119,11 @@ int Run(const Options& options) {
     const auto faces = [](const hapco::sim::ContactSurface& s) {
       return s.subtriangle_faces.empty() ? s.triangles.size() : s.triangles.size() / 4;
     };
-    std::printf("          obstacle %zu faces, %zu nodes (%zu on sharp edges: reverse-pass slaves); "
+    std::printf("          obstacle %zu faces, %zu nodes (%zu %s: reverse-pass slaves); "
                 "tool %zu faces, %zu nodes\n",
-                faces(o), o.nodes.size(), model.obstacle_edge_nodes().size(), faces(t), t.nodes.size());
+                faces(o), o.nodes.size(), model.obstacle_edge_nodes().size(),
+                scene.reverse_pass_all_nodes ? "all candidates (contact.reverse_pass_slaves)" : "on sharp edges",
+                faces(t), t.nodes.size());
     std::printf("          quadratic faces searched on %s (contact.quadratic_face_search)\n",
                 scene.quadratic_face_subtriangles ? "their four sub-triangles through the midside nodes"
                                                   : "the flat triangle of their corners");

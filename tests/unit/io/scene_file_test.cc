@@ -154,6 +154,16 @@ TEST(SceneFileTest, QuadraticFaceSearchIsReadAndAnUnknownValueNamed) {
   EXPECT_NE(message.find("CORNER_TRIANGLE or FOUR_SUBTRIANGLES"), std::string::npos) << message;
 }
 
+TEST(SceneFileTest, ReversePassSlavesAreReadAndAnUnknownValueNamed) {
+  EXPECT_FALSE(LoadSceneFile(kBenchmark1).reverse_pass_all_nodes) << "default: SHARP_EDGE_NODES";
+  const std::string from = "activation_gap_m: 0.0005";
+  EXPECT_TRUE(ParseSceneText(Benchmark1With(from, from + " reverse_pass_slaves: ALL_SURFACE_NODES"), "scene.txtpb")
+                  .reverse_pass_all_nodes);
+  const std::string message = ErrorOf(Benchmark1With(from, from + " reverse_pass_slaves: 3"));
+  EXPECT_NE(message.find("contact.reverse_pass_slaves"), std::string::npos) << message;
+  EXPECT_NE(message.find("SHARP_EDGE_NODES or ALL_SURFACE_NODES"), std::string::npos) << message;
+}
+
 TEST(SceneFileTest, BodyWithoutDirichletConditionIsRejectedAsSingular) {
   std::string text = Benchmark1With("  clamped_faces: X_MIN\n  clamped_faces: X_MAX\n", "");
   const std::string message = ErrorOf(text);

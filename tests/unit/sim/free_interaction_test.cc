@@ -226,6 +226,7 @@ struct RandomPathCase {
   fem::ElementOrder tool_order;
   int ci_seed;  // the path CI runs: one whose first 600 steps load the bar (12 scanned per case)
   bool four_subtriangles = false;  // contact.quadratic_face_search FOUR_SUBTRIANGLES (both bodies Tet10)
+  bool all_reverse_slaves = false;  // contact.reverse_pass_slaves ALL_SURFACE_NODES
 };
 
 class RandomPathTest : public ::testing::TestWithParam<RandomPathCase> {};
@@ -253,6 +254,7 @@ TEST_P(RandomPathTest, PrecomputedMatchesFullSolves) {
   SceneSpec scene = BarScene(GetParam().clamp_both_ends, fem::ElementOrder::kTet10, {10, 2, 2});
   scene.tool.box.order = GetParam().tool_order;
   scene.quadratic_face_subtriangles = GetParam().four_subtriangles;
+  scene.reverse_pass_all_nodes = GetParam().all_reverse_slaves;
   const TwoBodyModel model(scene);
   if (GetParam().four_subtriangles) {  // both passes search sub-triangles
     ASSERT_EQ(model.obstacle_surface().subtriangle_faces.size(), model.obstacle_surface().triangles.size());
@@ -309,11 +311,13 @@ INSTANTIATE_TEST_SUITE_P(BarsAndTools, RandomPathTest,
                                            RandomPathCase{false, fem::ElementOrder::kTet10, 11},
                                            RandomPathCase{true, fem::ElementOrder::kTet4, 10},
                                            RandomPathCase{false, fem::ElementOrder::kTet4, 8},
-                                           RandomPathCase{true, fem::ElementOrder::kTet10, 5, true}),
+                                           RandomPathCase{true, fem::ElementOrder::kTet10, 5, true},
+                                           RandomPathCase{true, fem::ElementOrder::kTet4, 10, false, true}),
                          [](const ::testing::TestParamInfo<RandomPathCase>& param_info) {
                            return std::string(param_info.param.clamp_both_ends ? "BothEndsClamped" : "OneEndClamped") +
                                   (param_info.param.tool_order == fem::ElementOrder::kTet10 ? "Tet10Tool" : "Tet4Tool") +
-                                  (param_info.param.four_subtriangles ? "FourSubtriangles" : "");
+                                  (param_info.param.four_subtriangles ? "FourSubtriangles" : "") +
+                                  (param_info.param.all_reverse_slaves ? "AllReverseSlaves" : "");
                          });
 
 // With edge contacts (an obstacle corner pressing into the tool's face) the force on the
@@ -337,6 +341,76 @@ TEST(FreeInteractionTest, EdgeContactsKeepTheForceBalance) {
     EXPECT_LT((clamps - out.contact_force_n).norm(), 1e-8 * scale) << "step " << k;
   }
   EXPECT_GT(edge_steps, 3) << "the path must cross the clamped edge with edge contacts";
+}
+
+// A full second pass (contact.reverse_pass_slaves ALL_SURFACE_NODES). Where the obstacle's
+// surface nodes are denser than the tool's, the obstacle's faces bulge between the tool's
+// nodes and through its face unless the obstacle's nodes are slaves too. Checked against an
+// independent model of the same press: a tool meshed finer than the obstacle, whose own nodes
+// hold the obstacle's surface (one pass is right there). The punch is nearly rigid (E 1e10 Pa
+// against the bar's 3e6 Pa) and frictionless, so both models press the same flat face.
+struct PunchPress {
+  double force_z_n = 0.0;
+  double highest_bulge_m = 0.0;  // obstacle top nodes under the punch above its bottom face
+  int edge_contacts = 0;
+  bool converged = true;
+};
+
+PunchPress PressFlatPunch(Eigen::Vector3i tool_cells, bool all_obstacle_nodes, double depth_m) {
+  SceneSpec scene = BarScene(true, fem::ElementOrder::kTet10, {20, 4, 2});
+  scene.tool.box.divisions = tool_cells;
+  scene.tool.material = {1.0e10, 0.3};
+  scene.friction_coefficient = 0.0;
+  scene.reverse_pass_all_nodes = all_obstacle_nodes;
+  const TwoBodyModel model(scene);
+  TwoBodySession session(model);
+  PunchPress press;
+  const std::vector<Eigen::Vector3d> path = PolylinePath({{0, 0, 0}, {0, 0, -depth_m}}, 1e-4);
+  for (std::size_t k = 1; k < path.size(); ++k) {
+    const StepOutput& out = session.Step(path[k]);
+    press.converged = press.converged && out.status == contact::SolverStatus::kConverged;
+    press.force_z_n = out.contact_force_n.z();
+    press.edge_contacts = out.num_edge_contacts;
+  }
+  Eigen::VectorXd obstacle_u, tool_u;
+  session.FullDisplacements(&obstacle_u, &tool_u);
+  const auto& tool_x = model.tool().mesh().nodes_m;
+  double tool_bottom_m = -1.0;  // highest point of the punch's bottom face now, m
+  for (int node = 0; node < model.tool().mesh().num_nodes(); ++node) {
+    if (std::abs(tool_x(node, 2) - 0.02) < 1e-9) tool_bottom_m = std::max(tool_bottom_m, 0.02 + tool_u(3 * node + 2));
+  }
+  const auto& bar_x = model.obstacle().mesh().nodes_m;
+  press.highest_bulge_m = -1.0;
+  for (int node = 0; node < model.obstacle().mesh().num_nodes(); ++node) {
+    const bool under_punch = std::abs(bar_x(node, 2) - 0.02) < 1e-9 && bar_x(node, 0) > 0.04 - 1e-9 &&
+                             bar_x(node, 0) < 0.06 + 1e-9;
+    if (under_punch) press.highest_bulge_m = std::max(press.highest_bulge_m, 0.02 + obstacle_u(3 * node + 2) - tool_bottom_m);
+  }
+  return press;
+}
+
+TEST(FreeInteractionTest, FullSecondPassHoldsAFinerObstacleUnderACoarseTool) {
+  const double depth_m = 1e-3;
+  // The reference: tool nodes every 1.25 mm over obstacle nodes every 2.5 mm (Tet10, 5 mm cells).
+  const PunchPress fine_tool = PressFlatPunch({16, 16, 1}, false, depth_m);
+  // One tool cell: tool nodes only at the punch's four corners.
+  const PunchPress edges_only = PressFlatPunch({1, 1, 1}, false, depth_m);
+  const PunchPress full_pass = PressFlatPunch({1, 1, 1}, true, depth_m);
+  std::printf("flat punch 1 mm: fine tool %.3f N (bulge %.2e m); coarse tool, edge slaves %.3f N (bulge %.2e m), "
+              "all slaves %.3f N (bulge %.2e m, %d reverse contacts)\n",
+              fine_tool.force_z_n, fine_tool.highest_bulge_m, edges_only.force_z_n, edges_only.highest_bulge_m,
+              full_pass.force_z_n, full_pass.highest_bulge_m, full_pass.edge_contacts);
+  EXPECT_TRUE(fine_tool.converged && edges_only.converged && full_pass.converged);
+  ASSERT_GT(fine_tool.force_z_n, 1.0);
+  // The reference keeps the bar under the punch's face (to its solver tolerance, 1e-7 m).
+  EXPECT_LT(fine_tool.highest_bulge_m, 1e-5);
+  // Without the full pass the bar bulges through the coarse tool's face, and the force is low.
+  EXPECT_GT(edges_only.highest_bulge_m, 1e-4);
+  EXPECT_LT(edges_only.force_z_n, 0.9 * fine_tool.force_z_n);
+  // With it, the bar stays under the face and the force is the reference's.
+  EXPECT_LT(full_pass.highest_bulge_m, 1e-5);
+  EXPECT_GT(full_pass.edge_contacts, 20);
+  EXPECT_NEAR(full_pass.force_z_n, fine_tool.force_z_n, 0.03 * fine_tool.force_z_n);
 }
 
 // The measurement: a 3 mm slide over the whole top face of both shipped benchmarks in
