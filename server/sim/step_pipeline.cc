@@ -1,6 +1,7 @@
 #include "sim/step_pipeline.h"
 
 #include <algorithm>
+#include <cmath>
 #include <limits>
 
 #include "common/error.h"
@@ -351,6 +352,14 @@ void TwoBodySession::DetectContacts(const Eigen::Vector3d& device_translation_m)
     int corner = 0;
     if (rigid.maxCoeff(&corner) > 1.0 - kOnEdge) {
       covered = covered || tool_is_slave_[static_cast<std::size_t>(tool_index[static_cast<std::size_t>(face.corners[static_cast<std::size_t>(corner)])])];
+    }
+    // Or on a 6-node face's midside node that pass 1 holds (midside k lies halfway between
+    // corners k and k + 1): the same two material points would be constrained twice, and the
+    // solver cannot split a force between two identical constraints (W singular there).
+    for (int k = 0; k < 3 && !covered && face.midsides[0] >= 0; ++k) {
+      if (std::abs(rigid[k] - 0.5) < kOnEdge && std::abs(rigid[(k + 1) % 3] - 0.5) < kOnEdge) {
+        covered = tool_is_slave_[static_cast<std::size_t>(tool_index[static_cast<std::size_t>(face.midsides[static_cast<std::size_t>(k)])])];
+      }
     }
     if (covered) continue;
     StepContact& c = contacts_.emplace_back();
