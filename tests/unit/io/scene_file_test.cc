@@ -144,24 +144,29 @@ TEST(SceneFileTest, AndersonAccelerationIsReadAndItsRangeChecked) {
   EXPECT_NE(message.find("solver.anderson_start"), std::string::npos) << message;
 }
 
-TEST(SceneFileTest, QuadraticFaceSearchIsReadAndAnUnknownValueNamed) {
-  EXPECT_FALSE(LoadSceneFile(kBenchmark1).quadratic_face_subtriangles) << "default: CORNER_TRIANGLE";
+// A contact enum: false by default (benchmark 1 does not set it), true with `value`, and an
+// unknown number is refused naming the field and the choices.
+template <typename Flag>
+void ExpectContactChoiceReadAndUnknownNamed(const std::string& field, const std::string& value,
+                                            const std::string& choices, Flag flag) {
+  EXPECT_FALSE(flag(LoadSceneFile(kBenchmark1))) << field << ": default";
   const std::string from = "activation_gap_m: 0.0005";
-  EXPECT_TRUE(ParseSceneText(Benchmark1With(from, from + " quadratic_face_search: FOUR_SUBTRIANGLES"), "scene.txtpb")
-                  .quadratic_face_subtriangles);
-  const std::string message = ErrorOf(Benchmark1With(from, from + " quadratic_face_search: 7"));
-  EXPECT_NE(message.find("contact.quadratic_face_search"), std::string::npos) << message;
-  EXPECT_NE(message.find("CORNER_TRIANGLE or FOUR_SUBTRIANGLES"), std::string::npos) << message;
+  EXPECT_TRUE(flag(ParseSceneText(Benchmark1With(from, from + " " + field + ": " + value), "scene.txtpb"))) << field;
+  const std::string message = ErrorOf(Benchmark1With(from, from + " " + field + ": 7"));
+  EXPECT_NE(message.find("contact." + field), std::string::npos) << message;
+  EXPECT_NE(message.find(choices), std::string::npos) << message;
+}
+
+TEST(SceneFileTest, QuadraticFaceSearchIsReadAndAnUnknownValueNamed) {
+  ExpectContactChoiceReadAndUnknownNamed("quadratic_face_search", "FOUR_SUBTRIANGLES",
+                                         "CORNER_TRIANGLE or FOUR_SUBTRIANGLES",
+                                         [](const sim::SceneSpec& spec) { return spec.quadratic_face_subtriangles; });
 }
 
 TEST(SceneFileTest, ReversePassSlavesAreReadAndAnUnknownValueNamed) {
-  EXPECT_FALSE(LoadSceneFile(kBenchmark1).reverse_pass_all_nodes) << "default: SHARP_EDGE_NODES";
-  const std::string from = "activation_gap_m: 0.0005";
-  EXPECT_TRUE(ParseSceneText(Benchmark1With(from, from + " reverse_pass_slaves: ALL_SURFACE_NODES"), "scene.txtpb")
-                  .reverse_pass_all_nodes);
-  const std::string message = ErrorOf(Benchmark1With(from, from + " reverse_pass_slaves: 3"));
-  EXPECT_NE(message.find("contact.reverse_pass_slaves"), std::string::npos) << message;
-  EXPECT_NE(message.find("SHARP_EDGE_NODES or ALL_SURFACE_NODES"), std::string::npos) << message;
+  ExpectContactChoiceReadAndUnknownNamed("reverse_pass_slaves", "ALL_SURFACE_NODES",
+                                         "SHARP_EDGE_NODES or ALL_SURFACE_NODES",
+                                         [](const sim::SceneSpec& spec) { return spec.reverse_pass_all_nodes; });
 }
 
 TEST(SceneFileTest, BodyWithoutDirichletConditionIsRejectedAsSingular) {
