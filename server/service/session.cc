@@ -52,7 +52,7 @@ Session::Session(std::string client_id, const sim::TwoBodyModel& model,
   std::memcpy(force_.server_id, server_id.data(), id_length);
   std::memcpy(frame_->server_id, server_id.data(), id_length);
   const auto capacity = static_cast<uint32_t>(
-      std::min<std::size_t>(model.tool_candidates().size() + model.obstacle_edge_nodes().size(),
+      std::min<std::size_t>(model.tool_candidates().size() + model.obstacle_reverse_slaves().size(),
                             hapco_idl_MAX_CONTACT_SAMPLES));
   ReserveContacts(frame_.get(), capacity);
 }

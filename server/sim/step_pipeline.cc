@@ -18,6 +18,19 @@ constexpr double kOnEdge = 1e-6;
 
 Eigen::Vector3d Block(const Eigen::VectorXd& vector, int index) { return vector.segment<3>(3 * index); }
 
+// The node of a face (corner, or midside of a 6-node face) at barycentric point l, or -1 where
+// l is at none. Midside k lies halfway between corners k and k + 1 (fem::SurfaceTriangle).
+int FaceNodeAt(const fem::SurfaceTriangle& face, const Eigen::Vector3d& l) {
+  int corner = 0;
+  if (l.maxCoeff(&corner) > 1.0 - kOnEdge) return face.corners[static_cast<std::size_t>(corner)];
+  for (int k = 0; k < 3 && face.midsides[0] >= 0; ++k) {
+    if (std::abs(l[k] - 0.5) < kOnEdge && std::abs(l[(k + 1) % 3] - 0.5) < kOnEdge) {
+      return face.midsides[static_cast<std::size_t>(k)];
+    }
+  }
+  return -1;
+}
+
 // Σ_k Σ_l c_k d_l C(p_k, q_l) over one body's 3x3 compliance blocks (rows maps a surface slot
 // to its block row in C), world axes, m/N.
 Eigen::Matrix3d WeightedBlockSum(const Eigen::MatrixXd& compliance, const std::vector<int>& rows,
@@ -45,8 +58,8 @@ TwoBodySession::TwoBodySession(const TwoBodyModel& model, SolveMode mode)
       obstacle_surface_(model.obstacle_surface()),
       tool_pass_(model.obstacle_surface().triangles, model.obstacle().mesh().nodes_m,
                  model.tool_surface().nodes, model.tool_surface().node_normals, model.obstacle_surface().subtriangle_faces),
-      edge_pass_(model.tool_surface().triangles, model.tool().mesh().nodes_m, model.obstacle_edge_nodes(),
-                 model.obstacle_edge_normals(), model.tool_surface().subtriangle_faces) {
+      edge_pass_(model.tool_surface().triangles, model.tool().mesh().nodes_m, model.obstacle_reverse_slaves(),
+                 model.obstacle_reverse_slave_normals(), model.tool_surface().subtriangle_faces) {
   solver = model.scene().solver;
   parameters = model.scene().solver_parameters;
   // A *new* contact deeper than about half a body's thickness would face that body's far
@@ -61,7 +74,7 @@ TwoBodySession::TwoBodySession(const TwoBodyModel& model, SolveMode mode)
 
   const std::size_t n_tool = tool_surface_.nodes.size();
   const std::size_t n_obstacle = obstacle_surface_.nodes.size();
-  const std::size_t n_edge = model.obstacle_edge_nodes().size();
+  const std::size_t n_edge = model.obstacle_reverse_slaves().size();
   // Every workspace of the haptic path is sized here for the most contacts the scene can have
   // (one per tool surface node and per obstacle edge node), so Step allocates only when the
   // contact count changes (W, ũ, μ).
@@ -87,7 +100,7 @@ TwoBodySession::TwoBodySession(const TwoBodyModel& model, SolveMode mode)
   obstacle_loaded_.reserve(n_obstacle);
   edge_node_slot_.resize(n_edge);
   for (std::size_t e = 0; e < n_edge; ++e) {
-    edge_node_slot_[e] = obstacle_surface_.node_index[static_cast<std::size_t>(model.obstacle_edge_nodes()[e])];
+    edge_node_slot_[e] = obstacle_surface_.node_index[static_cast<std::size_t>(model.obstacle_reverse_slaves()[e])];
   }
   Reset();
 }
@@ -346,21 +359,16 @@ void TwoBodySession::DetectContacts(const Eigen::Vector3d& device_translation_m)
         tool_reference.row(face.corners[1]).transpose() + device_translation_m,
         tool_reference.row(face.corners[2]).transpose() + device_translation_m);
     bool covered = false;
-    for (int k = 0; k < 3 && !all_obstacle_nodes_are_slaves; ++k) {
-      covered = covered || (tool_surface_.sharp_edges[triangle][static_cast<std::size_t>(k)] && rigid[(k + 2) % 3] < kOnEdge);
-    }
-    int corner = 0;
-    if (rigid.maxCoeff(&corner) > 1.0 - kOnEdge) {
-      covered = covered || tool_is_slave_[static_cast<std::size_t>(tool_index[static_cast<std::size_t>(face.corners[static_cast<std::size_t>(corner)])])];
-    }
-    // Or on a 6-node face's midside node that pass 1 holds (midside k lies halfway between
-    // corners k and k + 1): the same two material points would be constrained twice, and the
-    // solver cannot split a force between two identical constraints (W singular there).
-    for (int k = 0; k < 3 && !covered && face.midsides[0] >= 0; ++k) {
-      if (std::abs(rigid[k] - 0.5) < kOnEdge && std::abs(rigid[(k + 1) % 3] - 0.5) < kOnEdge) {
-        covered = tool_is_slave_[static_cast<std::size_t>(tool_index[static_cast<std::size_t>(face.midsides[static_cast<std::size_t>(k)])])];
+    if (!all_obstacle_nodes_are_slaves) {
+      for (int k = 0; k < 3; ++k) {
+        covered = covered || (tool_surface_.sharp_edges[triangle][static_cast<std::size_t>(k)] && rigid[(k + 2) % 3] < kOnEdge);
       }
     }
+    // On a tool node (corner or midside) that pass 1 holds, the same two material points would
+    // be constrained twice, and the solver cannot split a force between two identical
+    // constraints (W singular there).
+    const int tool_node = FaceNodeAt(face, rigid);
+    covered = covered || (tool_node >= 0 && tool_is_slave_[static_cast<std::size_t>(tool_index[static_cast<std::size_t>(tool_node)])]);
     if (covered) continue;
     StepContact& c = contacts_.emplace_back();
     c.pass = ContactPass::kObstacleNode;

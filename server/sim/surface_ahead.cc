@@ -11,8 +11,8 @@ SurfaceAheadProbe::SurfaceAheadProbe(const TwoBodyModel& model, double reach_m)
       reach_m_(reach_m),
       tool_pass_(model.obstacle_surface().triangles, model.obstacle().mesh().nodes_m, model.tool_surface().nodes,
                  model.tool_surface().node_normals, model.obstacle_surface().subtriangle_faces),
-      edge_pass_(model.tool_surface().triangles, model.tool().mesh().nodes_m, model.obstacle_edge_nodes(),
-                 model.obstacle_edge_normals(), model.tool_surface().subtriangle_faces),
+      edge_pass_(model.tool_surface().triangles, model.tool().mesh().nodes_m, model.obstacle_reverse_slaves(),
+                 model.obstacle_reverse_slave_normals(), model.tool_surface().subtriangle_faces),
       tool_positions_m_(model.tool().mesh().nodes_m) {
   if (!(std::isfinite(reach_m) && reach_m > 0.0)) {
     throw InputError("surface-ahead reach must be finite and > 0 m, got " + std::to_string(reach_m));
@@ -20,7 +20,7 @@ SurfaceAheadProbe::SurfaceAheadProbe(const TwoBodyModel& model, double reach_m)
   // Separated pairs only (0 <= gap < reach): a probe runs when the step found no contact.
   parameters_.activation_gap_m = reach_m;
   parameters_.max_penetration_m = 0.0;
-  points_.reserve(model.tool_surface().nodes.size() + model.obstacle_edge_nodes().size());
+  points_.reserve(model.tool_surface().nodes.size() + model.obstacle_reverse_slaves().size());
 }
 
 const SurfaceAhead& SurfaceAheadProbe::Probe(const Eigen::Vector3d& device_translation_m) {

@@ -266,8 +266,8 @@ TwoBodyModel::TwoBodyModel(Parts parts)
   // Reverse-pass slaves: the sharp-edge nodes, or every candidate node (full two-pass).
   for (std::size_t i = 0; i < obstacle_surface_.nodes.size(); ++i) {
     if (scene_.reverse_pass_all_nodes || obstacle_surface_.on_sharp_edge[i]) {
-      obstacle_edge_nodes_.push_back(obstacle_surface_.nodes[i]);
-      obstacle_edge_normals_.push_back(obstacle_surface_.node_normals[i]);
+      obstacle_reverse_slaves_.push_back(obstacle_surface_.nodes[i]);
+      obstacle_reverse_slave_normals_.push_back(obstacle_surface_.node_normals[i]);
     }
   }
 

@@ -105,12 +105,12 @@ class TwoBodyModel {
   const BlockedCompliance& obstacle_compliance_m_per_n() const { return obstacle_surface_.compliance_m_per_n; }
   const BlockedCompliance& tool_compliance_m_per_n() const { return tool_surface_.compliance_m_per_n; }
 
-  // Obstacle nodes on sharp edges and corners (ids, sorted) with their normals: the slaves of
-  // the reverse pass (obstacle node against tool face), which catches an obstacle edge or
-  // corner pressing into a flat tool face where no tool node is. With the scene's
-  // reverse_pass_slaves ALL_SURFACE_NODES: every obstacle candidate node.
-  const std::vector<int>& obstacle_edge_nodes() const { return obstacle_edge_nodes_; }
-  const std::vector<Eigen::Vector3d>& obstacle_edge_normals() const { return obstacle_edge_normals_; }
+  // The slaves of the reverse pass (obstacle node against tool face; ids, sorted) with their
+  // normals: the obstacle's nodes on sharp edges and corners, which catch an obstacle edge or
+  // corner pressing into a flat tool face where no tool node is; with the scene's
+  // reverse_pass_slaves ALL_SURFACE_NODES, every obstacle candidate node.
+  const std::vector<int>& obstacle_reverse_slaves() const { return obstacle_reverse_slaves_; }
+  const std::vector<Eigen::Vector3d>& obstacle_reverse_slave_normals() const { return obstacle_reverse_slave_normals_; }
 
   // Tool surface displacement per unit device translation (3n_t x 3, m/m).
   const Eigen::MatrixXd& tool_unit_fields() const { return tool_unit_fields_; }
@@ -141,8 +141,8 @@ class TwoBodyModel {
   fem::ElasticBody obstacle_;
   fem::ElasticBody tool_;
   ContactSurface obstacle_surface_, tool_surface_;
-  std::vector<int> obstacle_edge_nodes_;
-  std::vector<Eigen::Vector3d> obstacle_edge_normals_;
+  std::vector<int> obstacle_reverse_slaves_;
+  std::vector<Eigen::Vector3d> obstacle_reverse_slave_normals_;
   Eigen::MatrixXd tool_unit_fields_;
   double obstacle_thickness_m_ = 0.0;
   double tool_thickness_m_ = 0.0;

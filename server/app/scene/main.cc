@@ -121,7 +121,7 @@ int Run(const Options& options) {
     };
     std::printf("          obstacle %zu faces, %zu nodes (%zu %s: reverse-pass slaves); "
                 "tool %zu faces, %zu nodes\n",
-                faces(o), o.nodes.size(), model.obstacle_edge_nodes().size(),
+                faces(o), o.nodes.size(), model.obstacle_reverse_slaves().size(),
                 scene.reverse_pass_all_nodes ? "all candidates (contact.reverse_pass_slaves)" : "on sharp edges",
                 faces(t), t.nodes.size());
     std::printf("          quadratic faces searched on %s (contact.quadratic_face_search)\n",

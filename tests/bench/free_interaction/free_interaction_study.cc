@@ -210,7 +210,7 @@ int Run(const Options& options) {
       const char* tool = fem::ToString(order);
       std::fprintf(stderr, "%s/%s: model %.1f s (%zu obstacle + %zu tool surface nodes, %zu edge nodes)\n",
                    scene_name, tool, build.ElapsedSeconds(), model.obstacle_candidates().size(),
-                   model.tool_candidates().size(), model.obstacle_edge_nodes().size());
+                   model.tool_candidates().size(), model.obstacle_reverse_slaves().size());
       // Frictionless twin of the shipped model: without friction the quasi-static answer is
       // path independent, so the sweep's out/back difference there is the model's own, and
       // with friction the rest is what friction explains.

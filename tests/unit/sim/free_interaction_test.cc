@@ -89,7 +89,7 @@ TEST(FreeInteractionTest, CandidatesComeFromTheGeometryNotTheTrajectory) {
   EXPECT_EQ(model_a.tool_candidates().size(), 75u - 9u);
   // The bar's 12 box edges carry its sharp-edge nodes: 4 x 21 + 4 x 5 + 4 x 5 - 8 corners
   // counted twice.
-  EXPECT_EQ(model_a.obstacle_edge_nodes().size(), 4u * 21 + 4 * 5 + 4 * 5 - 2 * 8);
+  EXPECT_EQ(model_a.obstacle_reverse_slaves().size(), 4u * 21 + 4 * 5 + 4 * 5 - 2 * 8);
 }
 
 TEST(FreeInteractionTest, ToolStartingInsideTheObstacleIsRefusedWithItsDepth) {
