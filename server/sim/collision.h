@@ -179,6 +179,9 @@ class ContactDetector {
   const DetectorStats& last_stats() const { return stats_; }
   const std::vector<fem::SurfaceTriangle>& obstacle_triangles() const { return triangles_; }
   const std::vector<int>& tool_nodes() const { return tool_nodes_; }
+  // Outward unit normal of each obstacle triangle in the reference configuration: what the
+  // normal-compatibility test (CollisionParameters::min_normal_opposition) reads.
+  const std::vector<Eigen::Vector3d>& reference_normals() const { return reference_normals_; }
   int bvh_node_count() const { return static_cast<int>(nodes_.size()); }
 
  private:

@@ -98,6 +98,38 @@ TwoBodySession::TwoBodySession(const TwoBodyModel& model, SolveMode mode)
   tool_loaded_runs_.reserve(n_tool);
   previous_ids_.reserve(static_cast<std::size_t>(max_contacts_));
   obstacle_loaded_.reserve(n_obstacle);
+  // Normal groups (see step_pipeline.h): the nearest of the 26 directions (±1, 0 per axis).
+  constexpr int kGroups = 26;
+  std::vector<Eigen::Vector3d> directions;
+  for (int x = -1; x <= 1; ++x)
+    for (int y = -1; y <= 1; ++y)
+      for (int z = -1; z <= 1; ++z)
+        if (x != 0 || y != 0 || z != 0) directions.push_back(Eigen::Vector3d(x, y, z).normalized());
+  const auto& tool_normals = tool_surface_.node_normals;
+  tool_normal_group_.resize(n_tool);
+  for (std::size_t i = 0; i < n_tool; ++i) {
+    int best = 0;
+    for (int k = 1; k < kGroups; ++k) {
+      if (directions[static_cast<std::size_t>(k)].dot(tool_normals[i]) >
+          directions[static_cast<std::size_t>(best)].dot(tool_normals[i])) {
+        best = k;
+      }
+    }
+    tool_normal_group_[i] = best;
+  }
+  // The same reference normals and threshold as the detector's test, so a face is left out only
+  // where that test would reject every node of every group near it.
+  const std::vector<Eigen::Vector3d>& face_normals = tool_pass_.reference_normals();
+  face_reachable_groups_.assign(face_normals.size(), 0);
+  for (std::size_t t = 0; t < face_normals.size(); ++t) {
+    for (std::size_t i = 0; i < n_tool; ++i) {
+      if (!(-face_normals[t].dot(tool_normals[i]) < tool_pass_parameters_.min_normal_opposition)) {
+        face_reachable_groups_[t] |= std::uint32_t{1} << tool_normal_group_[i];
+      }
+    }
+  }
+  group_lo_m_.resize(kGroups);
+  group_hi_m_.resize(kGroups);
   edge_node_slot_.resize(n_edge);
   for (std::size_t e = 0; e < n_edge; ++e) {
     edge_node_slot_[e] = obstacle_surface_.node_index[static_cast<std::size_t>(model.obstacle_reverse_slaves()[e])];
@@ -148,6 +180,8 @@ void TwoBodySession::BroadPhase(const Eigen::Vector3d& increment_m) {
   const Eigen::MatrixXd& unit_fields = model_.tool_unit_fields();
   Eigen::Vector3d lo = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity());
   Eigen::Vector3d hi = -lo;
+  std::fill(group_lo_m_.begin(), group_lo_m_.end(), lo);
+  std::fill(group_hi_m_.begin(), group_hi_m_.end(), hi);
   for (int i = 0; i < static_cast<int>(tool_nodes.size()); ++i) {
     const int node = tool_nodes[static_cast<std::size_t>(i)];
     const Eigen::Vector3d x = tool_reference.row(node).transpose() + Block(tool_displacement_m_, i) +
@@ -155,6 +189,9 @@ void TwoBodySession::BroadPhase(const Eigen::Vector3d& increment_m) {
     tool_positions_m_.row(node) = x.transpose();
     lo = lo.cwiseMin(x);
     hi = hi.cwiseMax(x);
+    const auto group = static_cast<std::size_t>(tool_normal_group_[static_cast<std::size_t>(i)]);
+    group_lo_m_[group] = group_lo_m_[group].cwiseMin(x);
+    group_hi_m_[group] = group_hi_m_[group].cwiseMax(x);
   }
 
   const auto& obstacle_nodes = obstacle_surface_.nodes;
@@ -211,8 +248,15 @@ void TwoBodySession::BroadPhase(const Eigen::Vector3d& increment_m) {
       }
     }
     const Eigen::Vector3d grow = moved.array() + near_m;
-    const bool enabled = ((obstacle_surface_.triangle_min_m[static_cast<std::size_t>(t)] - grow).array() <= hi.array()).all() &&
-                         ((obstacle_surface_.triangle_max_m[static_cast<std::size_t>(t)] + grow).array() >= lo.array()).all();
+    const Eigen::Vector3d face_lo = obstacle_surface_.triangle_min_m[static_cast<std::size_t>(t)] - grow;
+    const Eigen::Vector3d face_hi = obstacle_surface_.triangle_max_m[static_cast<std::size_t>(t)] + grow;
+    // Near a group of tool nodes whose normals can face it (the groups' boxes lie inside lo, hi).
+    bool enabled = false;
+    for (std::uint32_t groups = face_reachable_groups_[static_cast<std::size_t>(t)]; groups != 0 && !enabled;
+         groups &= groups - 1) {
+      const auto group = static_cast<std::size_t>(__builtin_ctz(groups));
+      enabled = (face_lo.array() <= group_hi_m_[group].array()).all() && (face_hi.array() >= group_lo_m_[group].array()).all();
+    }
     if (!enabled) continue;
     obstacle_triangle_enabled_[static_cast<std::size_t>(t)] = 1;
     enabled_triangles_.push_back(t);

@@ -227,6 +227,29 @@ TEST(PipelineTest, PressIsMonotoneAndOneClampIsSofterThanTwo) {
   }
 }
 
+// The broad phase keeps only faces that a tool node near them can face (the detector rejects
+// a face whose normal opposes no tool node's within 60°): pressing and sliding on the top face,
+// the bar's side faces below the tool (normals ±y, which only the tool's far side could face)
+// stay out of the region, so every node whose U = C f is computed lies on the top face. Before
+// the normal groups, the side faces' nodes at z = 10 mm were a quarter of the region.
+TEST(PipelineTest, BroadPhaseLeavesOutFacesNoToolNodeCanFace) {
+  const TwoBodyModel model(CoarseScene(fem::ElementOrder::kTet10, 0.3));
+  TwoBodySession session(model);
+  const auto& surface_nodes = model.obstacle_surface().nodes;
+  const auto& reference = model.obstacle().mesh().nodes_m;
+  for (int step = 1; step <= 16; ++step) {  // the press and the slide along +x
+    const StepOutput& out = session.Step(model.scene().DeviceTranslationAtStep(step));
+    ASSERT_GT(out.region_nodes, 0) << "step " << step;
+    if (step >= 4) {
+      EXPECT_GT(out.num_contacts, 0) << "step " << step;
+    }
+    for (int slot : session.broad_phase_region()) {
+      EXPECT_NEAR(reference(surface_nodes[static_cast<std::size_t>(slot)], 2), 0.02, 1e-12)
+          << "step " << step << ": region node " << surface_nodes[static_cast<std::size_t>(slot)] << " is not on the top face";
+    }
+  }
+}
+
 // A large device increment (the whole 3 mm press in one step, 3 m/s at 1 kHz) is still
 // detected: the predicted tool penetrates deep, finds the face it went through and is pushed
 // back. Frictionless contact is path independent up to the contact pairing: the big step
