@@ -88,6 +88,7 @@ struct PhantomClient::Dds {
       if (!info.valid_data) continue;
       service::ServerAnnouncement a = service::AnnouncementOf(status, MonotonicNowNs());
       if (a.server_id.empty()) continue;
+      a.writer_handle = info.publication_handle;
       {
         std::lock_guard<std::mutex> lock(servers_mutex);
         auto known = std::find_if(servers.begin(), servers.end(),
@@ -100,6 +101,15 @@ struct PhantomClient::Dds {
       }
       servers_changed.notify_all();
     }
+  }
+  // A server's status writer lost its liveliness lease (the process died or froze) or got it
+  // back: recorded in its announcement, so it is neither chosen nor waited for.
+  void OnLivelinessChanged(const dds_liveliness_changed_status_t& status) {
+    {
+      std::lock_guard<std::mutex> lock(servers_mutex);
+      service::ApplyLivelinessChange(servers, status.last_publication_handle, status.alive_count_change);
+    }
+    servers_changed.notify_all();
   }
 };
 
@@ -119,6 +129,8 @@ PhantomClient::PhantomClient(ClientConfig config) : config_(std::move(config)) {
   dds_->force_reader.SetOnDataAvailable([this] { OnForcesAvailable(); });
   Dds* dds = dds_.get();
   dds_->status_reader.SetOnDataAvailable([dds] { dds->OnStatusAvailable(); });
+  dds_->status_reader.SetOnLivelinessChanged(
+      [dds](const dds_liveliness_changed_status_t& status) { dds->OnLivelinessChanged(status); });
 }
 
 PhantomClient::~PhantomClient() {
@@ -270,6 +282,14 @@ std::string PhantomClient::ChooseServer(const std::string& avoid) {
       .value_or(std::string());
 }
 
+bool PhantomClient::ServerLeaseLapsed(const std::string& server_id) {
+  std::lock_guard<std::mutex> lock(dds_->servers_mutex);
+  for (const service::ServerAnnouncement& s : dds_->servers) {
+    if (s.server_id == server_id) return s.lease_lapsed;
+  }
+  return false;
+}
+
 void PhantomClient::SendJoin() {
   hapco_idl_SessionControl control{};
   service::SetClientId(control.client_id, config_.client_id);
@@ -321,9 +341,14 @@ void PhantomClient::Run(const std::atomic<bool>& stop, const std::function<void(
   // A server that answers late is not a dead one. On an overloaded host (nine DDS processes
   // on 2 cores: round trip p99 50 ms) the force timeout fires on live servers, and clients
   // moved 4-7 times in 8 s, each move restarting the session. So the force still ramps to
-  // zero after the safety timeout, but the client moves only once no force has come for
-  // max(timeout, kMoveRoundTrips x the recent round-trip high), the high decaying with a 2 s
-  // time constant: on an idle network that is the timeout itself (round trips ~1 ms).
+  // zero after the safety timeout, but the client moves only once
+  //   - the server's DDS liveliness lease has lapsed (StatusQos: 50 ms without any message
+  //     from its process, whatever the host's load: it died or froze), or
+  //   - no force has come for max(timeout, kMoveRoundTrips x the recent round-trip high), the
+  //     high decaying with a 2 s time constant (a live server that stopped answering this
+  //     client: on an idle network that is the timeout itself, round trips ~1 ms).
+  // The lease alone decides on a loaded host: waiting 4 round-trip highs there (160-260 ms)
+  // broke the 100 ms take-over bound when a server was killed.
   constexpr double kMoveRoundTrips = 4.0;
   const double round_trip_decay = std::exp(-tick_s / 2.0);
   double round_trip_high_ns = 0.0;
@@ -458,16 +483,22 @@ void PhantomClient::Run(const std::atomic<bool>& stop, const std::function<void(
     // ramps the force back up. The old server, if only slow, sees the JOIN or a pose
     // addressed elsewhere and closes its session: no client is ever answered by two servers.
     const double move_after_ns = std::max(static_cast<double>(timeout_ns), kMoveRoundTrips * round_trip_high_ns);
-    const bool server_gone = last_force_arrival_ns < 0 || static_cast<double>(now - last_force_arrival_ns) >= move_after_ns;
-    if (stale && server_gone && config_.server_id.empty() && now - last_move_try_ns >= kMoveRetryNs &&
-        now - last_move_ns >= kMinMoveIntervalNs) {
+    const bool may_move = stale && config_.server_id.empty() && now - last_move_try_ns >= kMoveRetryNs &&
+                          now - last_move_ns >= kMinMoveIntervalNs;
+    const bool silent_long = last_force_arrival_ns < 0 || static_cast<double>(now - last_force_arrival_ns) >= move_after_ns;
+    // (The lease is read under the server list's lock: only while stale, not on every tick.)
+    const bool lease_lapsed = may_move && !silent_long && ServerLeaseLapsed(server_id_);
+    if (may_move && (silent_long || lease_lapsed)) {
       last_move_try_ns = now;
       const std::string next = ChooseServer(server_id_);
       if (!next.empty() && next != server_id_) {
         if (log) {
-          char line[240];
-          std::snprintf(line, sizeof(line), "t=%.3f s: moving from server '%s' to '%s'", now_s, server_id_.c_str(),
-                        next.c_str());
+          char line[320];
+          const double silent_ms =
+              last_force_arrival_ns < 0 ? 0.0 : static_cast<double>(now - last_force_arrival_ns) * 1e-6;
+          std::snprintf(line, sizeof(line), "t=%.3f s: moving from server '%s' to '%s' (no force for %.0f ms%s)", now_s,
+                        server_id_.c_str(), next.c_str(), silent_ms,
+                        lease_lapsed ? ", its DDS liveliness lease lapsed" : "");
           log(line);
         }
         server_id_ = next;

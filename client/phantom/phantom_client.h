@@ -159,6 +159,9 @@ class PhantomClient {
   uint64_t newest_arrival_sequence_ = 0;  // receive thread only
   // The server for this client now (chosen from the announcements), "" for none known.
   std::string ChooseServer(const std::string& avoid);
+  // True while the DDS liveliness lease of `server_id`'s announcements has lapsed (the
+  // process is gone or frozen; qos.h kServerLivelinessLeaseNs). Locks the server list.
+  bool ServerLeaseLapsed(const std::string& server_id);
   // SESSION_JOIN addressed to server_id_ (tick thread or Connect).
   void SendJoin();
   std::string server_id_;

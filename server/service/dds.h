@@ -195,23 +195,42 @@ class Reader {
   // it typically calls Take. Setup time only; replaces a previous callback.
   void SetOnDataAvailable(std::function<void()> callback) {
     auto holder = std::make_unique<std::function<void()>>(std::move(callback));
-    dds_listener_t* listener = dds_create_listener(holder.get());
-    dds_lset_data_available(listener, &Reader::OnDataAvailable);
-    const dds_return_t rc = dds_set_listener(entity_.handle(), listener);
-    dds_delete_listener(listener);
-    CheckReturn(rc, "dds_set_listener");
-    callback_ = std::move(holder);  // the previous callback is no longer referenced
+    std::swap(on_data_, holder);
+    InstallListener();  // the previous callback (now in holder) is no longer referenced after this
+  }
+  // Calls `callback` on a Cyclone thread when a matched writer's liveliness changes (its lease
+  // lapsed, or it is alive again): status.last_publication_handle is that writer (the
+  // publication_handle of its samples), status.alive_count_change is -1 or +1. Same rules as
+  // SetOnDataAvailable; both callbacks may be set.
+  void SetOnLivelinessChanged(std::function<void(const dds_liveliness_changed_status_t&)> callback) {
+    auto holder = std::make_unique<std::function<void(const dds_liveliness_changed_status_t&)>>(std::move(callback));
+    std::swap(on_liveliness_, holder);
+    InstallListener();
   }
   // Removes the listener; returns once no callback runs any more (dds_set_listener waits for
   // the callbacks in progress), so what the callback uses may be destroyed afterwards.
   void ClearListener() noexcept { dds_set_listener(entity_.handle(), nullptr); }
 
  private:
+  void InstallListener() {
+    dds_listener_t* listener = dds_create_listener(nullptr);
+    if (on_data_) dds_lset_data_available_arg(listener, &Reader::OnDataAvailable, on_data_.get(), true);
+    if (on_liveliness_) {
+      dds_lset_liveliness_changed_arg(listener, &Reader::OnLivelinessChanged, on_liveliness_.get(), true);
+    }
+    const dds_return_t rc = dds_set_listener(entity_.handle(), listener);
+    dds_delete_listener(listener);
+    CheckReturn(rc, "dds_set_listener");
+  }
   static void OnDataAvailable(dds_entity_t /*reader*/, void* arg) {
     (*static_cast<std::function<void()>*>(arg))();
   }
-  // Declared first so it is destroyed last: the reader (and its listener) goes before it.
-  std::unique_ptr<std::function<void()>> callback_;
+  static void OnLivelinessChanged(dds_entity_t /*reader*/, const dds_liveliness_changed_status_t status, void* arg) {
+    (*static_cast<std::function<void(const dds_liveliness_changed_status_t&)>*>(arg))(status);
+  }
+  // Declared first so they are destroyed last: the reader (and its listener) goes before them.
+  std::unique_ptr<std::function<void()>> on_data_;
+  std::unique_ptr<std::function<void(const dds_liveliness_changed_status_t&)>> on_liveliness_;
   Entity entity_;
   Entity condition_;
   Entity waitset_;

@@ -55,6 +55,10 @@ Qos& Qos::LatencyBudget(dds_duration_t budget_ns) {
   dds_qset_latency_budget(qos_, budget_ns);
   return *this;
 }
+Qos& Qos::AutomaticLiveliness(dds_duration_t lease_ns) {
+  dds_qset_liveliness(qos_, DDS_LIVELINESS_AUTOMATIC, lease_ns);
+  return *this;
+}
 Qos& Qos::Partition(std::string_view name) {
   const std::string copy(name);
   dds_qset_partition1(qos_, copy.c_str());
@@ -72,6 +76,9 @@ bool Qos::GetDurability(dds_durability_kind_t* kind) const {
 }
 bool Qos::GetLatencyBudget(dds_duration_t* budget_ns) const {
   return dds_qget_latency_budget(qos_, budget_ns);
+}
+bool Qos::GetLiveliness(dds_liveliness_kind_t* kind, dds_duration_t* lease_ns) const {
+  return dds_qget_liveliness(qos_, kind, lease_ns);
 }
 std::string Qos::GetPartition() const {
   uint32_t n = 0;
@@ -104,7 +111,7 @@ Qos ContactStateQos(int32_t depth) {
 
 Qos StatusQos() {
   Qos q;
-  q.Reliable(0).KeepLast(1).TransientLocal().LatencyBudget(0);
+  q.Reliable(0).KeepLast(1).TransientLocal().LatencyBudget(0).AutomaticLiveliness(kServerLivelinessLeaseNs);
   return q;
 }
 

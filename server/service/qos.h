@@ -39,6 +39,10 @@ class Qos {
   // Cyclone takes this from the durability-service QoS (default 1), not from the history.
   Qos& HistoricalDepth(int32_t depth);
   Qos& LatencyBudget(dds_duration_t budget_ns);
+  // AUTOMATIC liveliness with this lease: Cyclone asserts it from its own threads (a PMD
+  // message every 0.8 lease, and any data of the participant), and a reader learns within
+  // the lease that the writer's process stopped.
+  Qos& AutomaticLiveliness(dds_duration_t lease_ns);
   Qos& Partition(std::string_view name);  // for publishers and subscribers
 
   // Read back, for tests and logs; false if the policy is unset.
@@ -46,6 +50,7 @@ class Qos {
   bool GetHistory(dds_history_kind_t* kind, int32_t* depth) const;
   bool GetDurability(dds_durability_kind_t* kind) const;
   bool GetLatencyBudget(dds_duration_t* budget_ns) const;
+  bool GetLiveliness(dds_liveliness_kind_t* kind, dds_duration_t* lease_ns) const;
   // The single partition name ("" when unset or more than one name).
   std::string GetPartition() const;
 
@@ -90,8 +95,18 @@ inline constexpr int32_t kContactStateDepth = 8;
 Qos ContactStateQos(int32_t depth = kContactStateDepth);
 
 // ServerStatus (server -> anyone, ~1 Hz): reliable (max_blocking_time 0, same reason as
-// contact states), transient-local, KEEP_LAST 1.
-// Why: a monitor or recorder that starts later still receives the latest status at once.
+// contact states), transient-local, KEEP_LAST 1, AUTOMATIC liveliness with a lease of
+// kServerLivelinessLeaseNs.
+// Why transient-local: a monitor or recorder that starts later still receives the latest
+// status at once.
+// Why the lease: it tells a dead server from a slow one. A client whose forces stopped moves
+// to another server; forces also stop coming from a live server on an overloaded host (9
+// DDS processes on 2 cores: round trips of 40-65 ms), so without another signal a client
+// waits several round trips before it moves (or bounces between live servers). Cyclone
+// keeps the lease alive from its own threads, not from the server's step loop, so a server
+// busy stepping stays alive, while a killed one's lease lapses kServerLivelinessLeaseNs
+// after its last message, whatever the load (the participant's own lease is 10 s).
+inline constexpr dds_duration_t kServerLivelinessLeaseNs = DDS_MSECS(50);
 Qos StatusQos();
 
 // SessionControl (client -> server, rare): reliable, KEEP_LAST 8, volatile,

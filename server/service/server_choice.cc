@@ -40,7 +40,7 @@ bool Serves(const ServerAnnouncement& server, std::string_view scene) {
 }
 
 bool Live(const ServerAnnouncement& server, int64_t now_ns, int64_t max_age_ns) {
-  return now_ns - server.heard_ns <= max_age_ns;
+  return !server.lease_lapsed && now_ns - server.heard_ns <= max_age_ns;
 }
 
 }  // namespace
@@ -62,6 +62,17 @@ ServerAnnouncement AnnouncementOf(const hapco_idl_ServerStatus& status, int64_t 
     begin = end + 1;
   }
   return a;
+}
+
+std::string ApplyLivelinessChange(std::span<ServerAnnouncement> servers, uint64_t writer_handle,
+                                  int32_t alive_count_change) {
+  if (writer_handle == 0 || alive_count_change == 0) return {};
+  for (ServerAnnouncement& s : servers) {
+    if (s.writer_handle != writer_handle) continue;
+    s.lease_lapsed = alive_count_change < 0;
+    return s.server_id;
+  }
+  return {};
 }
 
 std::optional<std::string> ChooseServer(std::span<const ServerAnnouncement> servers, std::string_view client_id,

@@ -29,13 +29,25 @@ struct ServerAnnouncement {
   uint32_t max_sessions = 0;
   std::vector<std::string> scenes;  // served scene names; empty: unknown (any scene)
   int64_t heard_ns = 0;             // CLOCK_MONOTONIC of the receiver when it arrived
+  // The DDS publication handle of its status writer (sample info), to match liveliness changes.
+  uint64_t writer_handle = 0;
+  // Its status writer's liveliness lease lapsed (StatusQos, 50 ms) and has not come back: the
+  // process is gone (killed, crashed) or frozen. Not chosen, not live; a new announcement or
+  // the lease coming back clears it.
+  bool lease_lapsed = false;
 };
 
 // The announcement in a ServerStatus sample (scene_names split at commas).
 ServerAnnouncement AnnouncementOf(const hapco_idl_ServerStatus& status, int64_t heard_ns);
 
+// Applies a liveliness change of the status writer `writer_handle` (DDS on_liveliness_changed:
+// alive_count_change < 0 lapsed, > 0 alive again) to the server it announced. Returns that
+// server's id, "" if no announcement came from that writer.
+std::string ApplyLivelinessChange(std::span<ServerAnnouncement> servers, uint64_t writer_handle,
+                                  int32_t alive_count_change);
+
 // Chooses the server for `client_id` joining `scene` ("" = the server's first scene): among
-// the servers heard within max_age_ns of now_ns that serve the scene and have a free session,
+// the servers heard within max_age_ns of now_ns whose lease has not lapsed, that serve the scene and have a free session,
 // not `avoid` (the server a client leaves) unless it is the only one, the one with the
 // smallest fill (sessions / max_sessions). Ties are broken by rendezvous hashing of
 // (client id, server id), so clients that join at once, all reading the same announcements,

@@ -47,6 +47,27 @@ TEST(ChooseServer, FullSilentAndAvoidedServersAreNotChosenWhileAnotherQualifies)
   EXPECT_FALSE(ChooseServer(std::vector<ServerAnnouncement>{}, "c", "bench1", "", kNow, kMaxAge).has_value());
 }
 
+TEST(ChooseServer, AServerWhoseLeaseLapsedIsNeitherChosenNorLiveUntilItIsAliveAgain) {
+  std::vector<ServerAnnouncement> servers = {Server("a-dead", 0), Server("b-busy", 10)};
+  servers[0].writer_handle = 11;
+  servers[1].writer_handle = 12;
+  ASSERT_EQ(ChooseServer(servers, "c", "bench1", "", kNow, kMaxAge), "a-dead");
+  EXPECT_FALSE(ServesUnaddressed("b-busy", servers, kNow, kMaxAge));  // "a-dead" has the smaller id
+  // Its status writer's lease lapsed (killed): it is not chosen, even as the only other
+  // server when the client leaves "b-busy", and the next id serves unaddressed poses.
+  EXPECT_EQ(ApplyLivelinessChange(servers, 11, -1), "a-dead");
+  EXPECT_EQ(ChooseServer(servers, "c", "bench1", "", kNow, kMaxAge), "b-busy");
+  EXPECT_EQ(ChooseServer(servers, "c", "bench1", "b-busy", kNow, kMaxAge), "b-busy");
+  EXPECT_TRUE(ServesUnaddressed("b-busy", servers, kNow, kMaxAge));
+  // A writer no announcement came from changes nothing; no change changes nothing.
+  EXPECT_EQ(ApplyLivelinessChange(servers, 99, +1), "");
+  EXPECT_EQ(ApplyLivelinessChange(servers, 11, 0), "");
+  EXPECT_EQ(ChooseServer(servers, "c", "bench1", "", kNow, kMaxAge), "b-busy");
+  // Alive again (a frozen process that resumed): chosen again.
+  EXPECT_EQ(ApplyLivelinessChange(servers, 11, +1), "a-dead");
+  EXPECT_EQ(ChooseServer(servers, "c", "bench1", "", kNow, kMaxAge), "a-dead");
+}
+
 TEST(ChooseServer, ClientsJoiningAtOnceSpreadOverEquallyLoadedServers) {
   // Every client reads the same announcements (all empty): the tie-break must not send them
   // all to one server. 300 ids over three servers: each gets a share near a third.

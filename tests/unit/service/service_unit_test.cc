@@ -49,6 +49,14 @@ TEST(QosProfiles, MatchTheDocumentedTable) {
   ExpectProfile(ContactStateQos(3), {DDS_RELIABILITY_RELIABLE, 0, 3, DDS_DURABILITY_TRANSIENT_LOCAL});
   ExpectProfile(StatusQos(), {DDS_RELIABILITY_RELIABLE, 0, 1, DDS_DURABILITY_TRANSIENT_LOCAL});
   ExpectProfile(SessionQos(), {DDS_RELIABILITY_RELIABLE, 0, 8, DDS_DURABILITY_VOLATILE});
+  // ServerStatus alone carries a liveliness lease: clients know a killed server is gone 50 ms
+  // after its last message; the streams keep Cyclone's default (automatic, infinite).
+  dds_liveliness_kind_t liveliness{};
+  dds_duration_t lease_ns = 0;
+  ASSERT_TRUE(StatusQos().GetLiveliness(&liveliness, &lease_ns));
+  EXPECT_EQ(liveliness, DDS_LIVELINESS_AUTOMATIC);
+  EXPECT_EQ(lease_ns, DDS_MSECS(50));
+  EXPECT_FALSE(ForceQos().GetLiveliness(&liveliness, &lease_ns));
 }
 
 TEST(QosProfiles, CopyAndMoveKeepThePolicies) {
