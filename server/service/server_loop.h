@@ -18,6 +18,7 @@
 #include <string>
 #include <vector>
 
+#include "common/background_deleter.h"
 #include "common/work_pool.h"
 #include "hapco_types.h"
 #include "service/dds.h"
@@ -175,6 +176,9 @@ class ServerLoop {
   Writer<hapco_idl_ContactStateFrame> recorder_probe_;
   WaitSet waitset_;
   std::map<std::string, Client> sessions_;
+  // Closed sessions are destroyed here, off the loop; declared after the participant and the
+  // models, so it drains before they go.
+  BackgroundDeleter retired_sessions_;
   std::set<std::string> left_clients_;  // sent SESSION_LEAVE and not joined since
   std::unordered_map<dds_instance_handle_t, std::string> writer_client_ids_;  // writer -> its client
   std::atomic<bool> stop_{false};
