@@ -17,13 +17,16 @@ struct PoseLimits {
   double max_jump_m = 0.002;
   // Flood limit (server only): a token bucket refilled at max_poses_per_ms per ms holding at
   // most flood_burst poses. A 1 kHz client with scheduling or network jitter never empties
-  // it; a client sending more than ~2 poses per ms for longer than ~25 ms does (extras
+  // it; a client sending more than ~2 poses per ms for longer than ~30 ms does (extras
   // dropped).
   double max_poses_per_ms = 2.0;
-  // 24: a burst of poses delayed together by network jitter, each with the earlier poses it
-  // repeats (DevicePose.recent, 12) when a reordered one was dropped, is stepped, not refused
-  // (±5 ms jitter bunches ~10 poses); the average stays bounded by max_poses_per_ms.
-  double flood_burst = 24.0;
+  // 28: the most a server takes from one 1 kHz client at once after a stall of its own (the
+  // pose reader's history of 16, PendingPoses::kCapacity, plus the 12 poses the oldest of them
+  // repeats, DevicePose.recent); also a burst of poses bunched by network jitter (±5 ms
+  // bunches ~10) with their repeats. None is refused: with 24, the 4 newest poses of such a
+  // burst were, and on a loaded host clients timed out on live servers (2026-12-05). The
+  // average stays bounded by max_poses_per_ms.
+  double flood_burst = 28.0;
 };
 
 // Why a pose was not stepped.

@@ -75,5 +75,47 @@ TEST(PoseStream, ABurstIsCheckedPoseToPose) {
   EXPECT_EQ(stream.Check(b, 3'000'000, limits, &b), sim::PoseVerdict::kDuplicate);
 }
 
+// After a stall of the server's own, a 1 kHz client's poses come in a burst: the reader's
+// history (PendingPoses::kCapacity, the server's pose reader depth) plus the poses the oldest of
+// them repeats. None of it is the client's doing, so none of it is refused as a flood (with a
+// burst of 24, the newest 4 were: the freshest poses went unanswered, and on a loaded host
+// clients timed out and moved off live servers).
+TEST(PoseStream, ABurstAfterTheServersOwnStallIsNotAFloodButAFasterClientIs) {
+  sim::PoseLimits limits;
+  PoseStream stream;
+  std::uint64_t sequence = 0;
+  std::int64_t now_ns = 0;
+  for (int k = 0; k < 10; ++k) {  // steady 1 kHz, one pose per loop
+    now_ns += 1'000'000;
+    const hapco_idl_DevicePose pose = PoseWithRepeats(++sequence, 0);
+    ASSERT_EQ(stream.Check(pose, now_ns, limits), sim::PoseVerdict::kAccept) << sequence;
+    stream.Accept(pose);
+  }
+  now_ns += 40'000'000;  // the server stalls 40 ms, then takes everything at once
+  const int burst = PendingPoses::kCapacity + static_cast<int>(hapco_idl_RECENT_SAMPLES);
+  for (int k = 0; k < burst; ++k) {
+    const hapco_idl_DevicePose pose = PoseWithRepeats(++sequence, 0);
+    ASSERT_EQ(stream.Check(pose, now_ns, limits), sim::PoseVerdict::kAccept) << "pose " << k + 1 << " of the burst";
+    stream.Accept(pose);
+  }
+  // A client sending 4 poses per ms (twice the allowed rate) for 200 ms: refused beyond the
+  // rate once the burst allowance is spent.
+  int accepted = 0, floods = 0;
+  for (int k = 0; k < 800; ++k) {
+    now_ns += 250'000;
+    hapco_idl_DevicePose pose = PoseWithRepeats(++sequence, 0);
+    pose.position_m = {0.010, 0, 0};  // standing still: only the rate matters
+    const sim::PoseVerdict verdict = stream.Check(pose, now_ns, limits);
+    if (verdict == sim::PoseVerdict::kFlood) {
+      ++floods;
+    } else if (verdict == sim::PoseVerdict::kAccept) {
+      ++accepted;
+      stream.Accept(pose);
+    }
+  }
+  EXPECT_GT(floods, 300);
+  EXPECT_LE(accepted, static_cast<int>(200 * limits.max_poses_per_ms + limits.flood_burst) + 1);
+}
+
 }  // namespace
 }  // namespace hapco::service
