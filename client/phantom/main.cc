@@ -172,7 +172,7 @@ int Run(const Options& o) {
               "  render latency (pose sampled -> rendering tick): p50 %.0f us, p99 %.0f us; server step+publish p50 %.0f us, p99 %.0f us\n"
               "  missed ticks %llu, stale ticks %llu, force timeouts %llu, resumed %llu, NaN forces %llu, clamped %llu, "
               "peak rendered force %.3f N, pose write errors %llu\n"
-              "  served by '%s' at the end, moved to another server %llu times\n",
+              "  served by '%s' at the end, moved to another server %llu times; server leases lapsed %llu, came back %llu\n",
               o.client_id.c_str(), s.ticks_run, static_cast<unsigned long long>(s.poses_published),
               static_cast<unsigned long long>(s.forces_received), g_stop.load() ? " (stopped by signal)" : "",
               hapco::QuantileOf(s.round_trip_us, 0.5), hapco::QuantileOf(s.round_trip_us, 0.99), hapco::QuantileOf(s.round_trip_us, 0.999), hapco::QuantileOf(s.round_trip_us, 1.0),
@@ -182,7 +182,9 @@ int Run(const Options& o) {
               static_cast<unsigned long long>(s.resumptions), static_cast<unsigned long long>(s.rejected_non_finite),
               static_cast<unsigned long long>(s.clamped), s.peak_rendered_n,
               static_cast<unsigned long long>(s.pose_write_errors), s.server_id.c_str(),
-              static_cast<unsigned long long>(s.server_moves));
+              static_cast<unsigned long long>(s.server_moves),
+              static_cast<unsigned long long>(s.server_leases_lapsed),
+              static_cast<unsigned long long>(s.server_leases_regained));
   if (config.render.mode == phantom::RenderMode::kLocalModel || config.render.passivity) {
     std::printf("  rendering %s: %llu ticks from a contact model, %llu from the surface ahead (%llu models; stiffness "
                 "capped %llu, extrapolation capped %llu ticks, pull prevented %llu, friction cone %llu); passivity "

@@ -107,6 +107,10 @@ struct ClientStats {
   uint64_t resumptions = 0;         // times forces came back after a timeout
   uint64_t ignored_notices = 0;     // notices "the server ignored pose N" received
   uint64_t server_moves = 0;        // times this client moved to another server after a timeout
+  // DDS liveliness of the servers' announcements (StatusQos, 50 ms lease): lapses seen, and
+  // lapses that came back (a live server that stalled 50 ms: the host is overloaded).
+  uint64_t server_leases_lapsed = 0;
+  uint64_t server_leases_regained = 0;
   std::string server_id;            // the server serving it at the end (empty: unaddressed)
   uint64_t server_ignored_poses = 0;  // the server's count in the newest sample
   double peak_rendered_n = 0;
@@ -160,8 +164,12 @@ class PhantomClient {
   // The server for this client now (chosen from the announcements), "" for none known.
   std::string ChooseServer(const std::string& avoid);
   // True while the DDS liveliness lease of `server_id`'s announcements has lapsed (the
-  // process is gone or frozen; qos.h kServerLivelinessLeaseNs). Locks the server list.
-  bool ServerLeaseLapsed(const std::string& server_id);
+  // process is gone or frozen; qos.h kServerLivelinessLeaseNs) and lapses can be trusted: no
+  // server's lease has lapsed and come back within kLeaseDistrustNs. Locks the server list.
+  bool ServerLeaseLapsedAndTrusted(const std::string& server_id, int64_t now_ns);
+  // A lease that lapsed and came back means a host or network that stalls 50 ms at a time;
+  // for this long after, a lapse is not taken as a death (the round-trip rule decides).
+  static constexpr int64_t kLeaseDistrustNs = 10'000'000'000LL;
   // SESSION_JOIN addressed to server_id_ (tick thread or Connect).
   void SendJoin();
   std::string server_id_;
