@@ -107,15 +107,13 @@ struct PhantomClient::Dds {
   void OnLivelinessChanged(const dds_liveliness_changed_status_t& status) {
     {
       std::lock_guard<std::mutex> lock(servers_mutex);
-      auto known = std::find_if(servers.begin(), servers.end(), [&status](const service::ServerAnnouncement& s) {
-        return s.writer_handle == status.last_publication_handle;
-      });
-      const bool was_lapsed = known != servers.end() && known->lease_lapsed;
-      service::ApplyLivelinessChange(servers, status.last_publication_handle, status.alive_count_change);
-      if (known != servers.end() && !was_lapsed && known->lease_lapsed) ++leases_lapsed;
-      if (was_lapsed && !known->lease_lapsed) {
-        ++leases_regained;
-        last_lease_regained_ns = MonotonicNowNs();
+      switch (service::ApplyLivelinessChange(servers, status.last_publication_handle, status.alive_count_change)) {
+        case service::LeaseChange::kLapsed: ++leases_lapsed; break;
+        case service::LeaseChange::kRegained:
+          ++leases_regained;
+          last_lease_regained_ns = MonotonicNowNs();
+          break;
+        case service::LeaseChange::kNone: break;
       }
     }
     servers_changed.notify_all();

@@ -64,15 +64,17 @@ ServerAnnouncement AnnouncementOf(const hapco_idl_ServerStatus& status, int64_t 
   return a;
 }
 
-std::string ApplyLivelinessChange(std::span<ServerAnnouncement> servers, uint64_t writer_handle,
+LeaseChange ApplyLivelinessChange(std::span<ServerAnnouncement> servers, uint64_t writer_handle,
                                   int32_t alive_count_change) {
-  if (writer_handle == 0 || alive_count_change == 0) return {};
+  if (writer_handle == 0 || alive_count_change == 0) return LeaseChange::kNone;
   for (ServerAnnouncement& s : servers) {
     if (s.writer_handle != writer_handle) continue;
-    s.lease_lapsed = alive_count_change < 0;
-    return s.server_id;
+    const bool lapsed = alive_count_change < 0;
+    if (s.lease_lapsed == lapsed) return LeaseChange::kNone;
+    s.lease_lapsed = lapsed;
+    return lapsed ? LeaseChange::kLapsed : LeaseChange::kRegained;
   }
-  return {};
+  return LeaseChange::kNone;
 }
 
 std::optional<std::string> ChooseServer(std::span<const ServerAnnouncement> servers, std::string_view client_id,

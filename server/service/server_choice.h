@@ -40,10 +40,16 @@ struct ServerAnnouncement {
 // The announcement in a ServerStatus sample (scene_names split at commas).
 ServerAnnouncement AnnouncementOf(const hapco_idl_ServerStatus& status, int64_t heard_ns);
 
+// What a liveliness change did to the announcement it concerns.
+enum class LeaseChange {
+  kNone,      // no announcement from that writer, or its state did not change
+  kLapsed,    // alive -> lapsed
+  kRegained,  // lapsed -> alive (a stalled process that resumed)
+};
+
 // Applies a liveliness change of the status writer `writer_handle` (DDS on_liveliness_changed:
-// alive_count_change < 0 lapsed, > 0 alive again) to the server it announced. Returns that
-// server's id, "" if no announcement came from that writer.
-std::string ApplyLivelinessChange(std::span<ServerAnnouncement> servers, uint64_t writer_handle,
+// alive_count_change < 0 lapsed, > 0 alive again) to the server it announced.
+LeaseChange ApplyLivelinessChange(std::span<ServerAnnouncement> servers, uint64_t writer_handle,
                                   int32_t alive_count_change);
 
 // Chooses the server for `client_id` joining `scene` ("" = the server's first scene): among

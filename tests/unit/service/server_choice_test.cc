@@ -55,16 +55,20 @@ TEST(ChooseServer, AServerWhoseLeaseLapsedIsNeitherChosenNorLiveUntilItIsAliveAg
   EXPECT_FALSE(ServesUnaddressed("b-busy", servers, kNow, kMaxAge));  // "a-dead" has the smaller id
   // Its status writer's lease lapsed (killed): it is not chosen, even as the only other
   // server when the client leaves "b-busy", and the next id serves unaddressed poses.
-  EXPECT_EQ(ApplyLivelinessChange(servers, 11, -1), "a-dead");
+  EXPECT_EQ(ApplyLivelinessChange(servers, 11, -1), LeaseChange::kLapsed);
+  EXPECT_TRUE(servers[0].lease_lapsed);
+  EXPECT_FALSE(servers[1].lease_lapsed);
   EXPECT_EQ(ChooseServer(servers, "c", "bench1", "", kNow, kMaxAge), "b-busy");
   EXPECT_EQ(ChooseServer(servers, "c", "bench1", "b-busy", kNow, kMaxAge), "b-busy");
   EXPECT_TRUE(ServesUnaddressed("b-busy", servers, kNow, kMaxAge));
-  // A writer no announcement came from changes nothing; no change changes nothing.
-  EXPECT_EQ(ApplyLivelinessChange(servers, 99, +1), "");
-  EXPECT_EQ(ApplyLivelinessChange(servers, 11, 0), "");
+  // A writer no announcement came from changes nothing; no change, or a repeated lapse,
+  // changes nothing.
+  EXPECT_EQ(ApplyLivelinessChange(servers, 99, +1), LeaseChange::kNone);
+  EXPECT_EQ(ApplyLivelinessChange(servers, 11, 0), LeaseChange::kNone);
+  EXPECT_EQ(ApplyLivelinessChange(servers, 11, -1), LeaseChange::kNone);
   EXPECT_EQ(ChooseServer(servers, "c", "bench1", "", kNow, kMaxAge), "b-busy");
   // Alive again (a frozen process that resumed): chosen again.
-  EXPECT_EQ(ApplyLivelinessChange(servers, 11, +1), "a-dead");
+  EXPECT_EQ(ApplyLivelinessChange(servers, 11, +1), LeaseChange::kRegained);
   EXPECT_EQ(ChooseServer(servers, "c", "bench1", "", kNow, kMaxAge), "a-dead");
 }
 
