@@ -245,10 +245,15 @@ TEST(RecorderProcess, KilledRecorderLeavesAReadableFile) {
 
   const std::string cut = dir + "/cut.hapcorec";
   std::filesystem::copy_file(file, cut, std::filesystem::copy_options::overwrite_existing);
-  std::filesystem::resize_file(cut, std::filesystem::file_size(file) - 7);
+  constexpr std::int64_t kCutBytes = 7;
+  std::filesystem::resize_file(cut, std::filesystem::file_size(file) - kCutBytes);
   const std::string torn = run_report(cut, "report-cut");
   EXPECT_NE(torn.find("torn tail"), std::string::npos) << torn;
-  const std::size_t complete_steps = steps.size() - (report.torn_tail ? 0 : 1);  // the last one is cut
+  // The cut reaches the last complete record unless a longer torn tail absorbs it. That
+  // record may be a status record (the recorder also stores ServerStatus), not a step: CI
+  // once had a status record last and expected one step fewer than were left.
+  const bool last_record_cut = !report.torn_tail || report.torn_tail_bytes < kCutBytes;
+  const std::size_t complete_steps = steps.size() - (last_record_cut && records.back().has_step() ? 1 : 0);
   EXPECT_NE(torn.find("steps      " + std::to_string(complete_steps) + ";"), std::string::npos) << torn;
 }
 
