@@ -389,6 +389,39 @@ Eigen::MatrixXd ElasticBody::ComplianceBlockBySolves(std::span<const int> nodes)
   return c;
 }
 
+void ElasticBody::ForEachComplianceColumnChunk(
+    std::span<const int> nodes, int chunk_nodes,
+    const std::function<void(int first, int count, const Eigen::MatrixXd& columns)>& sink) const {
+  CheckNodes(nodes, "compliance");
+  HAPCO_ASSERT(chunk_nodes >= 1, "chunk of at least one node");
+  const int s = static_cast<int>(nodes.size());
+  const int nf = num_free_dofs();
+  for (int first = 0; first < s; first += chunk_nodes) {
+    const int count = std::min(chunk_nodes, s - first);
+    Eigen::MatrixXd columns = Eigen::MatrixXd::Zero(3 * s, 3 * count);
+    if (nf > 0) {
+      // Unit loads at the chunk's free dofs; a Dirichlet dof's column stays zero.
+      Eigen::MatrixXd rhs = Eigen::MatrixXd::Zero(nf, 3 * count);
+      for (int k = 0; k < count; ++k)
+        for (int b = 0; b < 3; ++b) {
+          const int f = dof_to_free_[static_cast<std::size_t>(3 * nodes[static_cast<std::size_t>(first + k)] + b)];
+          if (f >= 0) rhs(f, 3 * k + b) = 1.0;
+        }
+      const Eigen::MatrixXd x = SolveFree(rhs);
+      for (int i = 0; i < s; ++i)
+        for (int a = 0; a < 3; ++a) {
+          const int f = dof_to_free_[static_cast<std::size_t>(3 * nodes[static_cast<std::size_t>(i)] + a)];
+          if (f >= 0) columns.row(3 * i + a) = x.row(f);
+        }
+      for (int k = 0; k < count; ++k)
+        for (int b = 0; b < 3; ++b) {
+          if (rhs.col(3 * k + b).isZero(0.0)) columns.col(3 * k + b).setZero();
+        }
+    }
+    sink(first, count, columns);
+  }
+}
+
 void ElasticBody::ComplianceBlockInto(std::span<const int> nodes, double* block_m_per_n) const {
   CheckNodes(nodes, "compliance");
   const int s = static_cast<int>(nodes.size());

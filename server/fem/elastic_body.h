@@ -91,6 +91,12 @@ class ElasticBody {
   // complement one): O(|S| nnz(L)). Kept as the baseline of fem_bench and a second, independent
   // computation for the tests; the simulation uses ComplianceBlock.
   Eigen::MatrixXd ComplianceBlockBySolves(std::span<const int> nodes) const;
+  // The columns of the same block, a chunk of nodes at a time, by batched solves with the
+  // body's factor (no dense |S| x |S| array): sink(first, count, columns) gets the 3|S| x
+  // 3·count columns of the nodes S[first .. first+count-1]. For compliances too large to hold
+  // whole (sim/blocked_compliance.h, banded storage): peak memory is the factor and one chunk.
+  void ForEachComplianceColumnChunk(std::span<const int> nodes, int chunk_nodes,
+                                    const std::function<void(int first, int count, const Eigen::MatrixXd& columns)>& sink) const;
   // The same block written into the caller's array (column-major, 3|S| x 3|S|, 9|S|² doubles),
   // which also holds the inversion's work when S is the body's compliance_nodes in that order:
   // then the precomputation's peak is that array and the factor, with no second dense copy.
