@@ -364,6 +364,11 @@ class SceneChecker {
       Fail("contact", contact, tree, "reach_m",
            "must be a finite distance >= 0 m (0: the default 0.1 m), got " + Number(contact.reach_m()));
     }
+    if (!(contact.compliance_range_m() >= 0.0) || !std::isfinite(contact.compliance_range_m())) {
+      Fail("contact", contact, tree, "compliance_range_m",
+           "must be a finite distance >= 0 m (0: every node pair), got " + Number(contact.compliance_range_m()));
+    }
+    spec->compliance_range_m = contact.compliance_range_m();
     spec->friction_coefficient = contact.friction_coefficient();
     spec->activation_gap_m = contact.activation_gap_m();
     if (contact.reach_m() > 0.0) spec->reach_m = contact.reach_m();

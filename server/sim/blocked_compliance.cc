@@ -16,7 +16,51 @@ BlockedCompliance::BlockedCompliance(int nodes) : nodes_(nodes) {
   data_ = AllocateZeroed(count);
 }
 
-BlockedCompliance::Storage BlockedCompliance::AllocateZeroed(std::size_t count) {
+BlockedCompliance BlockedCompliance::Banded(int nodes, std::vector<int> band_begin, std::vector<int> band_end) {
+  HAPCO_ASSERT(nodes >= 0 && band_begin.size() == static_cast<std::size_t>(nodes) &&
+                   band_end.size() == static_cast<std::size_t>(nodes),
+               "BlockedCompliance::Banded: one band per column");
+  for (int j = 0; j < nodes; ++j) {
+    const auto k = static_cast<std::size_t>(j);
+    HAPCO_ASSERT(0 <= band_begin[k] && band_begin[k] <= j && j < band_end[k] && band_end[k] <= nodes,
+                 "BlockedCompliance::Banded: a column's band must hold its own diagonal block");
+  }
+  BlockedCompliance c;
+  c.nodes_ = nodes;
+  c.data_ = AllocateZeroed(9 * static_cast<std::size_t>(nodes) * static_cast<std::size_t>(nodes), true);
+  c.band_begin_ = std::move(band_begin);
+  c.band_end_ = std::move(band_end);
+  return c;
+}
+
+double* BlockedCompliance::mutable_block(int i, int j) {
+  HAPCO_ASSERT(i >= 0 && j >= 0 && i < nodes_ && j < nodes_ && stored(i, j), "BlockedCompliance: block not stored");
+  return data_.get() + Offset(i, j);
+}
+
+std::size_t BlockedCompliance::bytes() const {
+  if (!banded()) return dense_bytes();
+  // The pages the stored blocks span (each column's band is one run of blocks).
+  constexpr std::size_t kPage = 4096;
+  std::size_t total = 0;
+  for (int j = 0; j < nodes_; ++j) {
+    const std::size_t first = sizeof(double) * Offset(band_begin(j), j) / kPage;
+    const std::size_t last = (sizeof(double) * Offset(band_end(j), j) - 1) / kPage;
+    total += (last - first + 1) * kPage;
+  }
+  return total;
+}
+
+BlockedCompliance::Storage BlockedCompliance::AllocateZeroed(std::size_t count, bool reserve_only) {
+  if (reserve_only) {
+    // Address space only: pages are backed when first written. No huge pages, which would
+    // back 2 MiB (several columns) for one written block.
+    const std::size_t bytes = sizeof(double) * (count + kPaddingDoubles);
+    void* memory = mmap(nullptr, bytes, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS | MAP_NORESERVE, -1, 0);
+    if (memory == MAP_FAILED) throw std::bad_alloc();
+    madvise(memory, bytes, MADV_NOHUGEPAGE);
+    return Storage(static_cast<double*>(memory), CompliancePagesUnmapper{bytes});
+  }
   // Anonymous pages (zero) on 2 MiB huge pages where the kernel allows it (THP "madvise"
   // mode, the common default): a step reads ~10^4 blocks scattered over ~10^3 small pages of
   // a 100+ MiB C, and with 4 KiB pages their TLB misses were most of the broad phase's time.

@@ -3,6 +3,7 @@
 #include <cstddef>
 #include <functional>
 #include <memory>
+#include <vector>
 
 #include <Eigen/Dense>
 
@@ -36,8 +37,28 @@ class BlockedCompliance {
   // this is the only 72 n²-byte array: no dense copy beside the blocks.
   static BlockedCompliance FromDenseInPlace(int nodes, const std::function<void(double* dense_m_per_n)>& write_dense);
 
+  // Banded (issue 11 item 4, docs/free-interaction.md "Beyond memory"): only the blocks (i, j)
+  // with band_begin[j] <= i < band_end[j] are stored, the others read as zero (node pairs
+  // farther apart than the scene's compliance range). The addresses stay those of the full
+  // layout, so the step's kernels are unchanged: one anonymous mapping of 72 n² bytes reserved
+  // without backing (MAP_NORESERVE, no huge pages), of which only the pages holding stored
+  // blocks are written. An unwritten page reads as zero and takes no memory, so with the nodes
+  // ordered along an axis (each column's band one run of slots) the memory is about 72 bytes
+  // per stored block. Fill with mutable_block().
+  static BlockedCompliance Banded(int nodes, std::vector<int> band_begin, std::vector<int> band_end);
+  bool banded() const { return !band_begin_.empty(); }
+  // Rows [band_begin(j), band_end(j)) of column j are stored (all rows when not banded).
+  int band_begin(int j) const { return banded() ? band_begin_[static_cast<std::size_t>(j)] : 0; }
+  int band_end(int j) const { return banded() ? band_end_[static_cast<std::size_t>(j)] : nodes_; }
+  bool stored(int i, int j) const { return i >= band_begin(j) && i < band_end(j); }
+  // Block (i, j) for writing; (i, j) must be stored.
+  double* mutable_block(int i, int j);
+
   int nodes() const { return nodes_; }
-  std::size_t bytes() const { return sizeof(double) * 9 * static_cast<std::size_t>(nodes_) * static_cast<std::size_t>(nodes_); }
+  // Memory the blocks take, bytes: 72 n² when dense; banded, the pages of the stored blocks.
+  std::size_t bytes() const;
+  // What the same compliance takes dense: 72 n² bytes.
+  std::size_t dense_bytes() const { return sizeof(double) * 9 * static_cast<std::size_t>(nodes_) * static_cast<std::size_t>(nodes_); }
   // C(i, j), m/N: displacement of node i per unit force at node j.
   Eigen::Map<const Eigen::Matrix3d> block(int i, int j) const {
     return Eigen::Map<const Eigen::Matrix3d>(data_.get() + Offset(i, j));
@@ -53,10 +74,11 @@ class BlockedCompliance {
   }
   using Storage = std::unique_ptr<double[], CompliancePagesUnmapper>;
   static constexpr std::size_t kPaddingDoubles = 4;  // zero doubles after the last block
-  static Storage AllocateZeroed(std::size_t count);
+  static Storage AllocateZeroed(std::size_t count, bool reserve_only = false);
 
   int nodes_ = 0;
   Storage data_;
+  std::vector<int> band_begin_, band_end_;  // empty when dense
 };
 
 }  // namespace hapco::sim

@@ -51,6 +51,10 @@ struct SceneSpec {
   // Device workspace radius, m: obstacle faces within this distance of the tool's home box
   // are contact candidates (TwoBodyModel), independent of the trajectory.
   double reach_m = 0.1;
+  // The obstacle's compliance is stored only between surface nodes within this distance
+  // along its surface's longest axis (BlockedCompliance::Banded); 0 = every pair, or
+  // automatic when the dense blocks do not fit (TwoBodyModel). m.
+  double compliance_range_m = 0.0;
   // Pair nodes with a 6-node face on its four flat sub-triangles (through the midside nodes)
   // instead of the flat triangle of its corners (scene.proto QuadraticFaceSearch).
   bool quadratic_face_subtriangles = false;

@@ -218,6 +218,15 @@ void TwoBodySession::BroadPhase(const Eigen::Vector3d& increment_m) {
     const double f = Block(obstacle_slot_force_n_, slot).norm();
     cell_moved_m_.noalias() += f * bound.col(slot);
   }
+  if (!obstacle_surface_.far_bound_m_per_n.empty()) {
+    // Banded compliance: the pairs beyond its range are not stored, so every cell may also
+    // have moved by their bound (TwoBodyModel: far_bound_m_per_n).
+    double far_m = 0.0;
+    for (int slot : obstacle_loaded_) {
+      far_m += obstacle_surface_.far_bound_m_per_n[static_cast<std::size_t>(slot)] * Block(obstacle_slot_force_n_, slot).norm();
+    }
+    cell_moved_m_.array() += far_m;
+  }
   for (int slot : region_) in_region_[static_cast<std::size_t>(slot)] = 0;
   region_.clear();
   const auto& triangles = obstacle_surface_.triangles;
@@ -327,6 +336,30 @@ void TwoBodySession::ObstacleDisplacementOnRegion() {
   for (int i : region_) obstacle_displacement_m_.segment<3>(3 * i).setZero();
   AddComplianceTimesForces(compliance_kernel, obstacle_surface_.compliance_m_per_n, region_runs_, obstacle_loaded_,
                            loaded_runs_, obstacle_slot_force_n_.data(), obstacle_displacement_m_.data());
+}
+
+bool TwoBodySession::WithinComplianceRange() const {
+  // Rows read this step: the region (which holds the loaded and contact slots by now); columns:
+  // the loaded slots (U = C f) and the contacts' slots (the W gather). Each column's stored
+  // rows are one run (BlockedCompliance::Banded), so the rows' span must lie inside it.
+  const BlockedCompliance& c = obstacle_surface_.compliance_m_per_n;
+  if (!c.banded() || mode_ == SolveMode::kFullSolve) return true;
+  int lo = std::numeric_limits<int>::max(), hi = -1;
+  for (int slot : region_) {
+    lo = std::min(lo, slot);
+    hi = std::max(hi, slot);
+  }
+  if (hi < 0) return true;
+  const auto covers = [&](int j) { return c.band_begin(j) <= lo && hi < c.band_end(j); };
+  for (int j : obstacle_loaded_) {
+    if (!covers(j)) return false;
+  }
+  for (const StepContact& contact : contacts_) {
+    for (int k = 0; k < contact.num_obstacle; ++k) {
+      if (!covers(contact.obstacle_slots[static_cast<std::size_t>(k)])) return false;
+    }
+  }
+  return true;
 }
 
 void TwoBodySession::CompleteContactDisplacements() {
@@ -450,6 +483,7 @@ const StepOutput& TwoBodySession::Step(const Eigen::Vector3d& device_translation
   BroadPhase(device_translation_m - device_translation_m_);
   DetectContacts(device_translation_m);
   CompleteContactDisplacements();
+  output_.compliance_out_of_range = !WithinComplianceRange();
   device_translation_m_ = device_translation_m;
   output_.num_contacts = static_cast<int>(contacts_.size());
   output_.detect_seconds = watch.ElapsedSeconds();

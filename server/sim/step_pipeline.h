@@ -86,6 +86,9 @@ struct StepOutput {
   double paper_error_m = 0.0;
   double fc3d_error = 0.0;
   int region_nodes = 0;           // obstacle surface nodes the broad phase kept
+  // Banded obstacle compliance (SceneSpec::compliance_range_m): the step needed a node pair
+  // beyond the range, which reads as zero (raise the range). Always false when dense.
+  bool compliance_out_of_range = false;
   double detect_seconds = 0.0;    // broad phase (incl. the obstacle displacement there) + both passes
   double assemble_seconds = 0.0;  // ũ and W
   double solve_seconds = 0.0;
@@ -151,6 +154,7 @@ class TwoBodySession {
   static void SlotRuns(const std::vector<int>& slots, std::vector<std::pair<int, int>>* runs);
   void DetectContacts(const Eigen::Vector3d& device_translation_m);
   void CompleteContactDisplacements();
+  bool WithinComplianceRange() const;
   // W and ũ; pair_blocks(a, b) gives Σ_pq c_ap c_bq C(p, q) over both bodies (world, m/N).
   template <typename PairBlocks>
   void AssembleProblem(const PairBlocks& pair_blocks);

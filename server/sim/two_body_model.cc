@@ -5,6 +5,7 @@
 #include <cmath>
 #include <limits>
 #include <map>
+#include <optional>
 #include <sstream>
 #include <utility>
 
@@ -43,7 +44,8 @@ std::vector<int> FaceNodes(const std::vector<fem::SurfaceTriangle>& faces) {
 
 // Everything of a ContactSurface except the compliance, from its faces; 6-node faces are split
 // into their four sub-triangles when `subtriangles` (scene quadratic_face_search).
-ContactSurface DescribeSurface(const fem::Mesh& mesh, std::vector<fem::SurfaceTriangle> triangles, bool subtriangles) {
+ContactSurface DescribeSurface(const fem::Mesh& mesh, std::vector<fem::SurfaceTriangle> triangles, bool subtriangles,
+                               int sort_axis = -1) {
   ContactSurface surface;
   if (subtriangles && !triangles.empty() && triangles.front().midsides[0] >= 0) {
     SubtriangleSplit split = SplitIntoSubtriangles(triangles);
@@ -68,6 +70,11 @@ ContactSurface DescribeSurface(const fem::Mesh& mesh, std::vector<fem::SurfaceTr
   }
   surface.triangle_tree = StaticBoxTree(surface.triangle_min_m, surface.triangle_max_m);
   surface.nodes = FaceNodes(surface.triangles);
+  if (sort_axis >= 0) {
+    // Banded compliance: along the axis, so that each node's stored partners are one run.
+    std::stable_sort(surface.nodes.begin(), surface.nodes.end(),
+                     [&](int a, int b) { return mesh.nodes_m(a, sort_axis) < mesh.nodes_m(b, sort_axis); });
+  }
   surface.node_index = IndexOf(surface.nodes, mesh.num_nodes());
 
   // Sharp edges: two faces of the surface meeting at more than kFeatureEdgeAngleRad. An edge
@@ -116,11 +123,57 @@ ContactSurface DescribeSurface(const fem::Mesh& mesh, std::vector<fem::SurfaceTr
   return surface;
 }
 
+// Rows [begin[j], end[j]) of each column: the nodes within range_m of node j along the axis
+// (`nodes` sorted along it).
+void RangeBands(const fem::Mesh& mesh, const std::vector<int>& nodes, int axis, double range_m, std::vector<int>* begin,
+                std::vector<int>* end) {
+  std::vector<double> x(nodes.size());
+  for (std::size_t i = 0; i < nodes.size(); ++i) x[i] = mesh.nodes_m(nodes[i], axis);
+  begin->resize(nodes.size());
+  end->resize(nodes.size());
+  const double inclusive_m = range_m * (1.0 + 1e-9);  // a pair at exactly the range is kept
+  for (std::size_t j = 0; j < nodes.size(); ++j) {
+    (*begin)[j] = static_cast<int>(std::lower_bound(x.begin(), x.end(), x[j] - inclusive_m) - x.begin());
+    (*end)[j] = static_cast<int>(std::upper_bound(x.begin(), x.end(), x[j] + inclusive_m) - x.begin());
+  }
+}
+
+// The banded compliance by batched solves, a chunk of columns at a time: the dense blocks
+// are never held (that is why the range is set), and each column's blocks beyond the range
+// leave only their norm, in far_bound_m_per_n.
+void ComputeBandedCompliance(const fem::ElasticBody& body, ContactSurface* surface) {
+  const int n = static_cast<int>(surface->nodes.size());
+  std::vector<int> begin, end;
+  RangeBands(body.mesh(), surface->nodes, surface->range_axis, surface->range_m, &begin, &end);
+  surface->compliance_m_per_n = BlockedCompliance::Banded(n, std::move(begin), std::move(end));
+  surface->far_bound_m_per_n.assign(static_cast<std::size_t>(n), 0.0);
+  BlockedCompliance& c = surface->compliance_m_per_n;
+  const int chunk = std::clamp(4'000'000 / std::max(1, 9 * n), 1, 64);  // ~32 MB of columns
+  body.ForEachComplianceColumnChunk(surface->nodes, chunk, [&](int first, int count, const Eigen::MatrixXd& columns) {
+    for (int k = 0; k < count; ++k) {
+      const int j = first + k;
+      double& far = surface->far_bound_m_per_n[static_cast<std::size_t>(j)];
+      for (int i = 0; i < n; ++i) {
+        const auto block = columns.block<3, 3>(3 * i, 3 * k);
+        if (c.stored(i, j)) {
+          Eigen::Map<Eigen::Matrix3d>(c.mutable_block(i, j)) = block;
+        } else {
+          for (int a = 0; a < 3; ++a) far = std::max(far, block.row(a).norm());
+        }
+      }
+    }
+  });
+}
+
 void ComputeCompliance(const fem::ElasticBody& body, ContactSurface* surface) {
   // Computed in the blocked layout's own storage and reordered there: the precomputation's
   // peak is the operator (and the body's factor), not the operator twice.
-  surface->compliance_m_per_n = BlockedCompliance::FromDenseInPlace(
-      static_cast<int>(surface->nodes.size()), [&](double* dense) { body.ComplianceBlockInto(surface->nodes, dense); });
+  if (surface->range_axis >= 0) {
+    ComputeBandedCompliance(body, surface);
+  } else {
+    surface->compliance_m_per_n = BlockedCompliance::FromDenseInPlace(
+        static_cast<int>(surface->nodes.size()), [&](double* dense) { body.ComplianceBlockInto(surface->nodes, dense); });
+  }
   // Cells of about two face sizes: fine enough that a clamped end's cells get small bounds,
   // coarse enough that the per-step bound costs cells x loaded nodes, not nodes x nodes.
   const auto& mesh = body.mesh();
@@ -144,7 +197,7 @@ void ComputeCompliance(const fem::ElasticBody& body, ContactSurface* surface) {
   surface->cell_axis_bound_m_per_n = Eigen::MatrixXd::Zero(3 * surface->num_cells, n);
   const BlockedCompliance& c = surface->compliance_m_per_n;
   for (int j = 0; j < static_cast<int>(n); ++j) {
-    for (int i = 0; i < static_cast<int>(n); ++i) {
+    for (int i = c.band_begin(j); i < c.band_end(j); ++i) {  // the blocks not stored are zero
       const int cell = surface->node_cell[static_cast<std::size_t>(i)];
       const auto block = c.block(i, j);
       for (int a = 0; a < 3; ++a) {
@@ -169,35 +222,56 @@ struct TwoBodyModel::Parts {
   SceneSpec scene;
   std::vector<fem::SurfaceTriangle> obstacle_faces, tool_faces;
   fem::ElasticBody obstacle, tool;
+  int obstacle_range_axis = -1;  // banded obstacle compliance: its axis and range, m
+  double obstacle_range_m = 0.0;
+  bool range_automatic = false;
+  std::size_t obstacle_dense_bytes = 0;
 };
 
 namespace {
 
 constexpr std::size_t kReleaseSchurFactorAboveBytes = std::size_t{512} << 20;
 
-// Refuses, before either body is factored, a scene whose dense compliance cannot be held. The
-// blocks take 72 n² bytes per surface of n nodes, and each body's factor keeps the Schur factor
-// of its surface's dofs (8 m², m <= 3n free dofs) as a dense trailing block beside them, so
-// the model needs about twice the blocks (docs/free-interaction.md "Precomputation cost").
-void CheckOperatorsFit(std::size_t obstacle_nodes, std::size_t tool_nodes, std::size_t max_operator_bytes) {
-  const auto dense_bytes = [](std::size_t nodes) { return sizeof(double) * 9 * nodes * nodes; };
-  const std::size_t operators = dense_bytes(obstacle_nodes) + dense_bytes(tool_nodes);
-  std::size_t limit = max_operator_bytes;
-  std::string limit_source = "the given limit";
-  if (max_operator_bytes == TwoBodyModel::kOperatorsWithinAvailableMemory) {
-    const std::optional<std::size_t> available = AvailableMemoryBytes();
-    if (!available) return;  // nothing to judge by: let the allocation decide
-    limit = *available / 2;
-    limit_source = "half of the " + std::to_string(*available >> 20) +
-                   " MiB this machine (or container) has available, as the factors hold as much again";
+std::size_t DenseBytes(std::size_t nodes) { return sizeof(double) * 9 * nodes * nodes; }
+
+// The memory the operators may take, bytes (nullopt: nothing to judge by), and its source.
+// The blocks take 72 n² bytes per surface of n nodes, and each body's factor keeps the Schur
+// factor of its surface's dofs (8 m², m <= 3n free dofs) as a dense trailing block beside
+// them, so the model needs about twice the blocks (docs/free-interaction.md "Precomputation
+// cost").
+std::optional<std::size_t> OperatorLimit(std::size_t max_operator_bytes, std::string* source) {
+  if (max_operator_bytes != TwoBodyModel::kOperatorsWithinAvailableMemory) {
+    *source = "the given limit";
+    return max_operator_bytes;
   }
-  if (operators <= limit) return;
-  std::ostringstream message;
-  message << "the dense compliance of the contact surfaces would need " << operators / double(1 << 20) << " MiB ("
-          << obstacle_nodes << " obstacle + " << tool_nodes << " tool surface nodes, 72·n² bytes each), above "
-          << limit_source << " (" << limit / double(1 << 20)
-          << " MiB): use fewer divisions, a smaller contact.reach_m, or Tet4 elements";
-  throw InputError(message.str());
+  const std::optional<std::size_t> available = AvailableMemoryBytes();
+  if (!available) return std::nullopt;  // let the allocation decide
+  *source = "half of the " + std::to_string(*available >> 20) +
+            " MiB this machine (or container) has available, as the factors hold as much again";
+  return *available / 2;
+}
+
+// The axis along which the nodes spread most.
+int LongestAxis(const fem::Mesh& mesh, const std::vector<int>& nodes) {
+  Eigen::Vector3d lo = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+  for (int node : nodes) {
+    lo = lo.cwiseMin(Position(mesh, node));
+    hi = hi.cwiseMax(Position(mesh, node));
+  }
+  int axis = 0;
+  (hi - lo).maxCoeff(&axis);
+  return axis;
+}
+
+// The blocks a banded compliance stores, bytes (72 per node pair within the range).
+std::size_t BandedBytes(const fem::Mesh& mesh, std::vector<int> nodes, int axis, double range_m) {
+  std::stable_sort(nodes.begin(), nodes.end(),
+                   [&](int a, int b) { return mesh.nodes_m(a, axis) < mesh.nodes_m(b, axis); });
+  std::vector<int> begin, end;
+  RangeBands(mesh, nodes, axis, range_m, &begin, &end);
+  std::size_t blocks = 0;
+  for (std::size_t j = 0; j < nodes.size(); ++j) blocks += static_cast<std::size_t>(end[j] - begin[j]);
+  return sizeof(double) * 9 * blocks;
 }
 
 }  // namespace
@@ -243,10 +317,52 @@ TwoBodyModel::Parts TwoBodyModel::MakeParts(SceneSpec scene, std::size_t max_ope
   }
   std::vector<int> obstacle_candidates = FaceNodes(reachable);
   std::vector<int> tool_candidates = FaceNodes(tool_faces);
-  CheckOperatorsFit(obstacle_candidates.size(), tool_candidates.size(), max_operator_bytes);
+
+  // Refused before either body is factored if the operators cannot be held. A dense obstacle
+  // compliance that does not fit is stored banded instead (BlockedCompliance::Banded) when
+  // that fits: the pairs within a range of each other, which is all a step reads.
+  if (!(std::isfinite(scene.compliance_range_m) && scene.compliance_range_m >= 0.0)) {
+    throw InputError("scene compliance_range_m must be a finite distance >= 0 m, got " +
+                     std::to_string(scene.compliance_range_m));
+  }
+  std::string limit_source;
+  const std::optional<std::size_t> limit = OperatorLimit(max_operator_bytes, &limit_source);
+  const std::size_t obstacle_dense = DenseBytes(obstacle_candidates.size());
+  const std::size_t tool_bytes = DenseBytes(tool_candidates.size());
+  double range_m = scene.compliance_range_m;
+  bool automatic = false;
+  if (range_m == 0.0 && limit && obstacle_dense + tool_bytes > *limit) {
+    const Eigen::Vector3d tool_extent = tool_mesh.nodes_m.colwise().maxCoeff() - tool_mesh.nodes_m.colwise().minCoeff();
+    range_m = kAutomaticRangeToolExtents * tool_extent.maxCoeff();
+    automatic = true;
+  }
+  const int axis = range_m > 0.0 ? LongestAxis(obstacle_mesh, obstacle_candidates) : -1;
+  const std::size_t obstacle_bytes =
+      range_m > 0.0 ? BandedBytes(obstacle_mesh, obstacle_candidates, axis, range_m) : obstacle_dense;
+  if (limit && obstacle_bytes + tool_bytes > *limit) {
+    std::ostringstream message;
+    message << "the dense compliance of the contact surfaces would need " << (obstacle_dense + tool_bytes) / double(1 << 20)
+            << " MiB (" << obstacle_candidates.size() << " obstacle + " << tool_candidates.size()
+            << " tool surface nodes, 72·n² bytes each)";
+    if (range_m > 0.0) {
+      message << ", and stored within a range of " << range_m << " m " << (obstacle_bytes + tool_bytes) / double(1 << 20)
+              << " MiB";
+    }
+    message << ", above " << limit_source << " (" << *limit / double(1 << 20)
+            << " MiB): use fewer divisions, a smaller contact.reach_m, Tet4 elements, or a smaller "
+               "contact.compliance_range_m";
+    throw InputError(message.str());
+  }
+  // A banded obstacle gets its compliance by solves: its factor keeps CHOLMOD's own order.
+  if (range_m > 0.0) obstacle_candidates.clear();
   fem::ElasticBody obstacle = BuildBody(scene.obstacle, std::move(obstacle_mesh), std::move(obstacle_candidates));
   fem::ElasticBody tool = BuildBody(scene.tool, std::move(tool_mesh), std::move(tool_candidates));
-  return Parts{std::move(scene), std::move(reachable), std::move(tool_faces), std::move(obstacle), std::move(tool)};
+  Parts parts{std::move(scene), std::move(reachable), std::move(tool_faces), std::move(obstacle), std::move(tool)};
+  parts.obstacle_range_axis = axis;
+  parts.obstacle_range_m = range_m;
+  parts.range_automatic = automatic;
+  parts.obstacle_dense_bytes = obstacle_dense;
+  return parts;
 }
 
 TwoBodyModel::TwoBodyModel(SceneSpec scene, std::size_t max_operator_bytes)
@@ -261,7 +377,12 @@ TwoBodyModel::TwoBodyModel(Parts parts)
   const fem::Mesh& tool_mesh = tool_.mesh();
   obstacle_thickness_m_ = SmallestExtent(obstacle_mesh);
   tool_thickness_m_ = SmallestExtent(tool_mesh);
-  obstacle_surface_ = DescribeSurface(obstacle_mesh, std::move(parts.obstacle_faces), scene_.quadratic_face_subtriangles);
+  obstacle_surface_ = DescribeSurface(obstacle_mesh, std::move(parts.obstacle_faces), scene_.quadratic_face_subtriangles,
+                                      parts.obstacle_range_axis);
+  obstacle_surface_.range_axis = parts.obstacle_range_axis;
+  obstacle_surface_.range_m = parts.obstacle_range_m;
+  stats_.obstacle_dense_bytes = parts.obstacle_dense_bytes;
+  stats_.range_chosen_automatically = parts.range_automatic;
   tool_surface_ = DescribeSurface(tool_mesh, std::move(parts.tool_faces), scene_.quadratic_face_subtriangles);
   // Reverse-pass slaves: the sharp-edge nodes, or every candidate node (full two-pass).
   for (std::size_t i = 0; i < obstacle_surface_.nodes.size(); ++i) {

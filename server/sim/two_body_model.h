@@ -64,6 +64,14 @@ struct ContactSurface {
   Eigen::MatrixXd cell_axis_bound_m_per_n;  // 3·cells x n
   std::vector<int> node_cell;               // per node: its cell
   int num_cells = 0;
+  // Banded compliance (SceneSpec::compliance_range_m): `nodes` are ordered along
+  // `range_axis` and C(i, j) is stored for |x_i - x_j| <= range_m along it; else -1 and 0.
+  int range_axis = -1;
+  double range_m = 0.0;
+  // Per node j: the largest ||C(3i + a, 3j..3j+2)|| over the rows i beyond the range (m/N), so
+  // the broad phase stays rigorous without those blocks: under forces f no node moves by
+  // more than Σ_j far_bound(j)·|f_j| through the pairs not stored. Empty when not banded.
+  std::vector<double> far_bound_m_per_n;
 };
 
 struct TwoBodyModelStats {
@@ -71,6 +79,10 @@ struct TwoBodyModelStats {
   double compliance_seconds = 0.0;  // both compliance blocks, s
   double total_seconds = 0.0;
   std::size_t operator_bytes = 0;   // memory held by the precomputed dense operators, bytes
+  // What the obstacle's compliance would take dense, bytes, and whether the range was chosen
+  // because that did not fit (SceneSpec::compliance_range_m = 0).
+  std::size_t obstacle_dense_bytes = 0;
+  bool range_chosen_automatically = false;
 };
 
 class TwoBodyModel {
@@ -135,6 +147,9 @@ class TwoBodyModel {
  private:
   struct Parts;  // the scene, its bodies and their candidate faces, made before the members
   static Parts MakeParts(SceneSpec scene, std::size_t max_operator_bytes);
+  // The range chosen when the dense blocks do not fit: this many times the tool's largest
+  // extent (the step's region spans the tool and its search margins).
+  static constexpr double kAutomaticRangeToolExtents = 3.0;
   explicit TwoBodyModel(Parts parts);
 
   SceneSpec scene_;

@@ -127,15 +127,26 @@ int Run(const Options& options) {
     std::printf("          quadratic faces searched on %s (contact.quadratic_face_search)\n",
                 scene.quadratic_face_subtriangles ? "their four sub-triangles through the midside nodes"
                                                   : "the flat triangle of their corners");
-    std::printf("precomputed, %.2f s (compliance %.2f s: each surface's Schur complement, inverted):\n",
-                watch.ElapsedSeconds(), model.stats().compliance_seconds);
+    std::printf("precomputed, %.2f s (compliance %.2f s: %s):\n", watch.ElapsedSeconds(),
+                model.stats().compliance_seconds,
+                o.range_axis >= 0 ? "the obstacle's by batched solves, the tool's Schur complement inverted"
+                                  : "each surface's Schur complement, inverted");
     const auto largest_diagonal = [](const hapco::sim::BlockedCompliance& c) {
       double largest = 0.0;
       for (int i = 0; i < c.nodes(); ++i) largest = std::max(largest, c.block(i, i).diagonal().maxCoeff());
       return largest;
     };
-    std::printf("          obstacle compliance %dx%d (3x3 blocks per node pair), %.1f MiB\n",
-                3 * o.compliance_m_per_n.nodes(), 3 * o.compliance_m_per_n.nodes(), mib(o.compliance_m_per_n.bytes()));
+    if (o.range_axis >= 0) {
+      std::printf("          obstacle compliance %dx%d, banded: node pairs within %.3g m along %c%s, %.1f MiB "
+                  "(dense: %.1f MiB; steps that need a pair beyond the range are counted)\n",
+                  3 * o.compliance_m_per_n.nodes(), 3 * o.compliance_m_per_n.nodes(), o.range_m, "xyz"[o.range_axis],
+                  model.stats().range_chosen_automatically ? " (chosen: the dense blocks do not fit in memory)"
+                                                           : " (contact.compliance_range_m)",
+                  mib(o.compliance_m_per_n.bytes()), mib(o.compliance_m_per_n.dense_bytes()));
+    } else {
+      std::printf("          obstacle compliance %dx%d (3x3 blocks per node pair), %.1f MiB\n",
+                  3 * o.compliance_m_per_n.nodes(), 3 * o.compliance_m_per_n.nodes(), mib(o.compliance_m_per_n.bytes()));
+    }
     std::printf("          tool compliance %dx%d, %.2f MiB; tool unit fields %ldx3, %.3f MiB\n",
                 3 * t.compliance_m_per_n.nodes(), 3 * t.compliance_m_per_n.nodes(), mib(t.compliance_m_per_n.bytes()),
                 model.tool_unit_fields().rows(), mib(dense_bytes(model.tool_unit_fields())));
@@ -147,8 +158,9 @@ int Run(const Options& options) {
     std::printf("          the bodies' factors (kept for full solves and field export) hold %.1f MiB more: obstacle "
                 "%.1f MiB, %s\n",
                 mib(obstacle_factor.factor_bytes + model.tool().stats().factor_bytes), mib(obstacle_factor.factor_bytes),
-                obstacle_factor.schur_factor_bytes > 0 ? "with its surface's dense Schur factor last"
-                                                      : "refactored without its surface's dense Schur factor");
+                o.range_axis >= 0                        ? "in CHOLMOD's own order (its banded compliance came from solves)"
+                : obstacle_factor.schur_factor_bytes > 0 ? "with its surface's dense Schur factor last"
+                                                         : "refactored without its surface's dense Schur factor");
     std::printf("          the step reads them with the %s compliance kernels (this CPU's fastest; "
                 "sim/compliance_kernels.h)\n",
                 hapco::sim::ComplianceKernelName(hapco::sim::FastestComplianceKernel()));

@@ -337,6 +337,7 @@ int Run(const Options& options) {
   };
   const int steps = options.steps > 0 ? std::min(options.steps, trajectory_steps) : trajectory_steps;
   int not_converged = 0;
+  int out_of_range = 0;  // steps that needed a node pair beyond a banded compliance
   double peak_force_n = 0;
   long total_iterations = 0;
   hapco::Stopwatch run;
@@ -356,6 +357,7 @@ int Run(const Options& options) {
     const auto& out = session.Step(pose_m);
     const int phase = file_points.empty() ? scene.PhaseOfStep(step) : 0;
     if (out.status != hapco::contact::SolverStatus::kConverged) ++not_converged;
+    if (out.compliance_out_of_range) ++out_of_range;
     peak_force_n = std::max(peak_force_n, out.contact_force_n.norm());
     total_iterations += out.iterations;
     if (csv != nullptr) {
@@ -399,6 +401,10 @@ int Run(const Options& options) {
   }
   std::printf("%d steps in %.2f s: peak contact force %.3f N, %ld outer iterations, %d not converged\n",
               steps, run.ElapsedSeconds(), peak_force_n, total_iterations, not_converged);
+  if (model.obstacle_surface().range_axis >= 0) {
+    std::printf("compliance range %.3g m: %d steps needed a node pair beyond it%s\n", model.obstacle_surface().range_m,
+                out_of_range, out_of_range > 0 ? " (read as zero: raise contact.compliance_range_m)" : "");
+  }
   if (!ignored.empty()) {
     std::string kinds;
     int total = 0;

@@ -238,6 +238,7 @@ int Run(const Options& options) {
   // step, apart from it, with its allocations.
   std::vector<double> local_model_s, local_model_alloc, local_model_unknowns;
   auto tick = std::chrono::steady_clock::now();
+  long beyond_range = 0;  // steps that needed a pair beyond a banded compliance
   for (int repeat = 0; repeat < options.repeats; ++repeat) {
     sim::TwoBodySession session(model, sim::SolveMode::kPrecomputed);
     session.compliance_kernel = KernelByName(options.kernel);
@@ -252,6 +253,7 @@ int Run(const Options& options) {
       all.Add(out);
       alloc_per_step.push_back(static_cast<double>(allocations));
       outer_iterations += out.iterations;
+      beyond_range += out.compliance_out_of_range;
       {
         const long model_before = g_allocations.load();
         Stopwatch model_watch;
@@ -278,6 +280,10 @@ int Run(const Options& options) {
               (std::string(cold.empty() ? "" : ", " + std::to_string(options.cold_mib) + " MiB read between steps") +
                (options.pace_us > 0 ? ", one step every " + std::to_string(options.pace_us) + " us" : ""))
                   .c_str());
+  if (model.obstacle_surface().range_axis >= 0) {
+    std::printf("  banded obstacle compliance, range %.3g m: %ld of %d steps needed a pair beyond it\n",
+                model.obstacle_surface().range_m, beyond_range / options.repeats, steps);
+  }
   volatile double keep_eviction_reads = cold_sum;  // the reads must not be optimised away
   (void)keep_eviction_reads;
   PrintRow("step", all.step);

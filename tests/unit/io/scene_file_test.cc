@@ -169,6 +169,18 @@ TEST(SceneFileTest, ReversePassSlavesAreReadAndAnUnknownValueNamed) {
                                          [](const sim::SceneSpec& spec) { return spec.reverse_pass_all_nodes; });
 }
 
+TEST(SceneFileTest, ComplianceRangeIsReadAndANegativeOrNonFiniteOneNamed) {
+  EXPECT_EQ(LoadSceneFile(kBenchmark1).compliance_range_m, 0.0) << "default: every pair";
+  const std::string from = "activation_gap_m: 0.0005";
+  EXPECT_EQ(ParseSceneText(Benchmark1With(from, from + " compliance_range_m: 0.04"), "scene.txtpb").compliance_range_m,
+            0.04);
+  for (const std::string bad : {"-0.01", "nan", "inf"}) {
+    const std::string message = ErrorOf(Benchmark1With(from, from + " compliance_range_m: " + bad));
+    EXPECT_NE(message.find("contact.compliance_range_m"), std::string::npos) << bad << ": " << message;
+    EXPECT_NE(message.find(">= 0 m"), std::string::npos) << bad << ": " << message;
+  }
+}
+
 TEST(SceneFileTest, BodyWithoutDirichletConditionIsRejectedAsSingular) {
   std::string text = Benchmark1With("  clamped_faces: X_MIN\n  clamped_faces: X_MAX\n", "");
   const std::string message = ErrorOf(text);

@@ -1,7 +1,10 @@
 // BlockedCompliance: the step's layout of a surface compliance holds exactly the dense values,
 // and the model's operator (filled column by column from the batched solves) equals the
 // dense compliance block of the same nodes.
+#include <algorithm>
+#include <cstdlib>
 #include <random>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -27,6 +30,34 @@ TEST(BlockedComplianceTest, EveryBlockIsTheDenseBlockAndRoundTrips) {
       EXPECT_TRUE(Eigen::Matrix3d(blocked.block(i, j)) == expected) << i << "," << j;
     }
   EXPECT_TRUE(blocked.ToDense() == dense);
+}
+
+// Banded: the stored blocks read back, the others read as zero, and only the pages of the
+// stored blocks count (large n: a column spans many pages).
+TEST(BlockedComplianceTest, BandedStoresItsBandAndReadsTheRestAsZero) {
+  const int n = 3000, half_width = 100;
+  std::vector<int> begin(n), end(n);
+  for (int j = 0; j < n; ++j) {
+    begin[static_cast<std::size_t>(j)] = std::max(0, j - half_width);
+    end[static_cast<std::size_t>(j)] = std::min(n, j + half_width + 1);
+  }
+  BlockedCompliance c = BlockedCompliance::Banded(n, begin, end);
+  ASSERT_TRUE(c.banded());
+  for (int j = 0; j < n; ++j)
+    for (int i = c.band_begin(j); i < c.band_end(j); ++i) {
+      double* block = c.mutable_block(i, j);
+      for (int k = 0; k < 9; ++k) block[k] = 1.0 + i + 0.001 * j + 1e-7 * k;
+    }
+  for (int j = 0; j < n; j += 97)
+    for (int i = 0; i < n; i += 13) {
+      const bool in_band = std::abs(i - j) <= half_width;
+      EXPECT_EQ(c.stored(i, j), in_band);
+      EXPECT_EQ(c.block(i, j)(2, 1), in_band ? 1.0 + i + 0.001 * j + 1e-7 * 5 : 0.0) << i << "," << j;
+    }
+  // 201 blocks of 72 bytes per column = 14 472 bytes: 4 or 5 pages of 4 KiB each.
+  EXPECT_GE(c.bytes(), static_cast<std::size_t>(n) * 4 * 4096);
+  EXPECT_LE(c.bytes(), static_cast<std::size_t>(n) * 5 * 4096);
+  EXPECT_LT(c.bytes(), c.dense_bytes() / 10);
 }
 
 TEST(BlockedComplianceTest, ModelOperatorEqualsTheDenseComplianceOfItsSurfaceNodes) {

@@ -112,17 +112,102 @@ TEST(FreeInteractionTest, ToolStartingAwayGetsANoteWithItsDistance) {
 }
 
 // The dense operators are estimated before anything is allocated: 72 n² bytes per surface.
-TEST(FreeInteractionTest, OversizedOperatorsAreRefusedBeforeAllocation) {
+// Above the limit the obstacle's compliance is stored banded (the pairs within 3 tool extents
+// along the bar), and refused only when that does not fit either.
+TEST(FreeInteractionTest, OversizedOperatorsAreBandedOrRefusedBeforeAllocation) {
   const SceneSpec scene = BarScene(true);
   // Surfaces: bar 21·5·5 − 19·3·3 = 354 nodes, tool 66: 72 (354² + 66²) = 9,336,384 bytes.
-  EXPECT_NO_THROW(TwoBodyModel(scene, 9'336'384));
-  try {
+  {
+    const TwoBodyModel model(scene, 9'336'384);
+    EXPECT_EQ(model.obstacle_surface().range_axis, -1) << "dense when it fits";
+    EXPECT_FALSE(model.obstacle_compliance_m_per_n().banded());
+  }
+  {
     const TwoBodyModel model(scene, 9'336'383);
+    EXPECT_TRUE(model.stats().range_chosen_automatically);
+    EXPECT_EQ(model.obstacle_surface().range_axis, 0) << "the bar's long axis";
+    EXPECT_NEAR(model.obstacle_surface().range_m, 3 * 0.02, 1e-12) << "3 x the tool's 2 cm";
+    EXPECT_LT(model.obstacle_compliance_m_per_n().bytes(), model.stats().obstacle_dense_bytes);
+  }
+  try {
+    const TwoBodyModel model(scene, 1'000'000);
     FAIL() << "an operator above the limit was accepted";
   } catch (const InputError& error) {
-    EXPECT_NE(std::string(error.what()).find("354 obstacle + 66 tool surface nodes"), std::string::npos)
-        << error.what();
+    const std::string what = error.what();
+    EXPECT_NE(what.find("354 obstacle + 66 tool surface nodes"), std::string::npos) << what;
+    EXPECT_NE(what.find("compliance_range_m"), std::string::npos) << what;
   }
+}
+
+// Banded compliance (issue 11 item 4): the pairs within the range are the dense ones
+// (independent computations: batched CHOLMOD solves against the Schur complement inverted),
+// the others are absent, and a step that stays within the range gets the dense forces.
+TEST(FreeInteractionTest, BandedComplianceHoldsTheDensePairsAndGivesTheDenseForces) {
+  SceneSpec banded_scene = BarScene(true, fem::ElementOrder::kTet10);
+  banded_scene.compliance_range_m = 0.04;
+  const TwoBodyModel dense(BarScene(true, fem::ElementOrder::kTet10)), banded(banded_scene);
+  const ContactSurface& d = dense.obstacle_surface();
+  const ContactSurface& b = banded.obstacle_surface();
+  ASSERT_EQ(b.range_axis, 0);
+  ASSERT_EQ(d.nodes.size(), b.nodes.size());
+  const auto& x = banded.obstacle().mesh().nodes_m;
+  int stored = 0, absent = 0;
+  double largest_absent = 0.0;
+  for (std::size_t j = 0; j < b.nodes.size(); j += 7) {
+    for (std::size_t i = 0; i < b.nodes.size(); ++i) {
+      const int bi = static_cast<int>(i), bj = static_cast<int>(j);
+      const int di = d.node_index[static_cast<std::size_t>(b.nodes[i])];
+      const int dj = d.node_index[static_cast<std::size_t>(b.nodes[j])];
+      const Eigen::Matrix3d want = d.compliance_m_per_n.block(di, dj);
+      const double apart_m = std::abs(x(b.nodes[i], 0) - x(b.nodes[j], 0));
+      if (std::abs(apart_m - 0.04) < 1e-9) continue;  // exactly at the range: kept, up to round-off
+      const bool within = apart_m < 0.04;
+      ASSERT_EQ(b.compliance_m_per_n.stored(bi, bj), within) << i << ", " << j;
+      if (within) {
+        ++stored;
+        EXPECT_LE((b.compliance_m_per_n.block(bi, bj) - want).norm(), 1e-9 * (want.norm() + 1e-9)) << i << ", " << j;
+      } else {
+        ++absent;
+        EXPECT_TRUE(b.compliance_m_per_n.block(bi, bj).isZero(0.0));
+        for (int a = 0; a < 3; ++a) largest_absent = std::max(largest_absent, want.row(a).norm());
+        for (int a = 0; a < 3; ++a) EXPECT_LE(want.row(a).norm(), b.far_bound_m_per_n[j] * (1 + 1e-9));
+      }
+    }
+  }
+  EXPECT_GT(stored, 0);
+  EXPECT_GT(absent, 0);
+  EXPECT_GT(largest_absent, 0.0) << "the far pairs are not negligible: the bound must carry them";
+  EXPECT_LT(banded.obstacle_compliance_m_per_n().bytes(), 0.8 * dense.obstacle_compliance_m_per_n().bytes());
+
+  // A press and a slide along the top face: every step within the range, the dense forces.
+  const std::vector<Eigen::Vector3d> path = {{0, 0, 0}, {0, 0, -0.002}, {-0.015, 0, -0.002}, {0.015, 0, -0.002}};
+  TwoBodySession dense_session(dense), banded_session(banded);
+  const std::vector<Eigen::Vector3d> poses = PolylinePath(path, 1e-4);
+  double peak_n = 0.0, largest_difference_n = 0.0;
+  for (std::size_t k = 1; k < poses.size(); ++k) {
+    const Eigen::Vector3d want = dense_session.Step(poses[k]).contact_force_n;
+    const StepOutput& got = banded_session.Step(poses[k]);
+    ASSERT_FALSE(got.compliance_out_of_range) << "step " << k;
+    peak_n = std::max(peak_n, want.norm());
+    largest_difference_n = std::max(largest_difference_n, (got.contact_force_n - want).norm());
+  }
+  EXPECT_GT(peak_n, 1.0);
+  // Round-off in W, through a solver stopped at 1e-7 m: far below what a user feels.
+  EXPECT_LE(largest_difference_n, 1e-6 * peak_n);
+}
+
+TEST(FreeInteractionTest, AStepBeyondTheComplianceRangeIsReported) {
+  SceneSpec scene = BarScene(true);
+  scene.compliance_range_m = 0.004;  // less than the tool's 2 cm: its contacts span more
+  const TwoBodyModel model(scene);
+  TwoBodySession session(model);
+  int beyond = 0;
+  for (const Eigen::Vector3d& pose : PolylinePath({{0, 0, 0}, {0, 0, -0.001}}, 1e-4)) {
+    const StepOutput& out = session.Step(pose);
+    beyond += out.compliance_out_of_range;
+    EXPECT_TRUE(out.contact_force_n.allFinite());
+  }
+  EXPECT_GT(beyond, 0);
 }
 
 // A straight press grows monotonically with depth, to half the bar's thickness, and pushes
