@@ -170,6 +170,7 @@ void ServerLoop::CloseSession(std::map<std::string, Client>::iterator it) {
   const SessionCounters& c = it->second.session->counters();
   closed_session_counters_.steps += c.steps;
   closed_session_counters_.non_finite_forces += c.non_finite_forces;
+  closed_session_counters_.beyond_compliance_range += c.beyond_compliance_range;
   closed_session_counters_.force_write_errors += c.force_write_errors;
   closed_session_counters_.contact_frames_dropped += c.contact_frames_dropped;
   closed_session_counters_.sequence_gaps += c.sequence_gaps;
@@ -460,6 +461,11 @@ void ServerLoop::StepQueued() {
         client.session->last_output().device_force_n.allFinite() == false) {
       Log(kLogFailure, "non-finite force for '" + id + "': last good force sent");
     }
+    if (client.session->counters().beyond_compliance_range == 1 && client.session->last_output().compliance_out_of_range) {
+      Log(kLogFailure, "a step of '" + id +
+                           "' needed obstacle node pairs beyond contact.compliance_range_m (read as zero, so its force is "
+                           "approximate): raise the range; further such steps are counted in the summary");
+    }
   }
 }
 
@@ -470,6 +476,7 @@ ServerCounters ServerLoop::counters() const {
     const SessionCounters& live = client.session->counters();
     s.steps += live.steps;
     s.non_finite_forces += live.non_finite_forces;
+    s.beyond_compliance_range += live.beyond_compliance_range;
     s.force_write_errors += live.force_write_errors;
     s.contact_frames_dropped += live.contact_frames_dropped;
     s.sequence_gaps += live.sequence_gaps;
@@ -477,6 +484,7 @@ ServerCounters ServerLoop::counters() const {
   }
   c.steps = s.steps;
   c.non_finite_forces = s.non_finite_forces;
+  c.beyond_compliance_range = s.beyond_compliance_range;
   c.force_write_errors = s.force_write_errors;
   c.contact_frames_dropped = s.contact_frames_dropped;
   c.sequence_gaps = s.sequence_gaps;
@@ -594,7 +602,11 @@ std::string ServerLoop::Summary() const {
                 static_cast<unsigned long long>(c.ignored_notices),
                 static_cast<unsigned long long>(c.poses_for_other_servers),
                 static_cast<unsigned long long>(c.sessions_moved_away));
-  return line;
+  std::string summary = line;
+  if (c.beyond_compliance_range > 0) {
+    summary += "; steps beyond contact.compliance_range_m " + std::to_string(c.beyond_compliance_range);
+  }
+  return summary;
 }
 
 void ServerLoop::Log(int kind, const std::string& message) {

@@ -58,6 +58,7 @@ struct ServerCounters {
   uint64_t superseded = 0;          // older poses of a client replaced by a newer one in a batch
   uint64_t steps = 0;
   uint64_t non_finite_forces = 0;   // solve gave NaN/Inf; the last good force was sent
+  uint64_t beyond_compliance_range = 0;  // steps that needed a pair beyond contact.compliance_range_m
   uint64_t force_write_errors = 0;
   uint64_t contact_frames_dropped = 0;
   uint64_t sequence_gaps = 0;       // sequences never stepped (superseded + lost + overwritten)

@@ -77,6 +77,7 @@ int64_t Session::StepAndPublish(const hapco_idl_DevicePose& pose, int64_t receiv
   const sim::StepOutput& out = physics_ == SessionPhysics::kContact ? sim_.Step(p) : kNoPhysics;
   const int64_t physics_ns = MonotonicNowNs();
   ++counters_.steps;
+  if (out.compliance_out_of_range) ++counters_.beyond_compliance_range;
   Eigen::Vector3d force_n = out.device_force_n;
   const bool force_finite = force_n.allFinite();
   if (!force_finite) {

@@ -28,6 +28,7 @@ using sim::PoseVerdict;
 struct SessionCounters {
   uint64_t steps = 0;
   uint64_t non_finite_forces = 0;      // solve gave NaN/Inf: the last good force was sent
+  uint64_t beyond_compliance_range = 0;  // steps that needed a pair beyond a banded compliance
   uint64_t force_write_errors = 0;
   uint64_t contact_frames_dropped = 0; // DDS_RETCODE_TIMEOUT (or other error) on the frame
   uint64_t contacts_truncated = 0;     // frames with more contacts than the IDL bound
