@@ -367,6 +367,52 @@ TEST(ServerProcess, PhysicsNoneAnswersEveryStepWithAZeroForce) {
   EXPECT_GE(received, 270);
 }
 
+// A banded compliance too short for the tool (contact.compliance_range_m below its extent):
+// the server keeps answering with finite forces, logs it once for the client and counts the
+// steps in its summary, as hapco-sim counts them offline for the same scene.
+TEST(ServerProcess, StepsBeyondTheComplianceRangeAreLoggedAndCounted) {
+  const std::string dir = TestDir();
+  const std::string domain = std::to_string(SetUpTestDomain());
+  std::string text = ReadFile(kScene);
+  const std::string contact = "contact {\n";
+  ASSERT_NE(text.find(contact), std::string::npos);
+  text.replace(text.find(contact), contact.size(), contact + "  compliance_range_m: 0.002\n");
+  const std::string scene = dir + "/short_range.txtpb";
+  std::ofstream(scene) << text;
+
+  Process sim({HAPCO_SIM_EXE, scene, "--quiet"}, dir + "/sim.out", dir + "/sim.err");
+  ASSERT_EQ(sim.Wait(120'000), 0) << ReadFile(dir + "/sim.err");
+  const std::string sim_out = ReadFile(dir + "/sim.out");
+  EXPECT_NE(sim_out.find("steps needed a node pair beyond it (read as zero"), std::string::npos) << sim_out;
+
+  Process server({HAPCO_SERVER_EXE, scene, "--domain", domain}, dir + "/server.out", dir + "/server.err");
+  {
+    Process phantom({HAPCO_PHANTOM_EXE, scene, "--client-id", "short-1", "--domain", domain, "--csv",
+                     dir + "/phantom.csv", "--connect-timeout-s", "60"},
+                    dir + "/phantom.out", dir + "/phantom.err");
+    ASSERT_EQ(phantom.Wait(120'000), 0) << ReadFile(dir + "/phantom.err");
+  }
+  server.Signal(SIGTERM);
+  ASSERT_EQ(server.Wait(30'000), 0) << ReadFile(dir + "/server.err");
+  const std::string log = ReadFile(dir + "/server.out") + ReadFile(dir + "/server.err");
+  std::size_t logged = 0;
+  for (std::size_t at = log.find("'short-1' needed obstacle node pairs beyond"); at != std::string::npos;
+       at = log.find("'short-1' needed obstacle node pairs beyond", at + 1)) {
+    ++logged;
+  }
+  EXPECT_EQ(logged, 1u) << log;
+  const std::size_t count_at = log.find("steps beyond contact.compliance_range_m ");
+  ASSERT_NE(count_at, std::string::npos) << log;
+  EXPECT_GT(std::stoll(log.substr(count_at + std::strlen("steps beyond contact.compliance_range_m "))), 0) << log;
+  int forces = 0;
+  for (const auto& row : ReadCsv(dir + "/phantom.csv")) {
+    if (std::stoll(row.at("force_sequence")) < 0) continue;
+    EXPECT_TRUE(Vec(row, "raw_fx_n", "raw_fy_n", "raw_fz_n").allFinite());
+    ++forces;
+  }
+  EXPECT_GE(forces, 270) << "of the scene's 310 poses";
+}
+
 // Bad input from a client the test plays itself (NaN, invalid id, out of workspace, jump,
 // duplicate, out of order, flood) is counted (ServerStatus) and the server keeps serving.
 TEST(ServerProcess, BadPosesAndInvalidClientIdAreCountedAndTheServerStaysUp) {
