@@ -440,8 +440,8 @@ void ServerLoop::StepQueued() {
   auto job = [&](int k) { step(*stepping_[static_cast<std::size_t>(k)]); };
   pool_.Run(static_cast<int>(stepping_.size()), job);
   if (stepping_.size() >= 2) ++counters_.parallel_batches;
-  for (const Client* stepped : stepping_) {
-    const Client& client = *stepped;
+  for (Client* stepped : stepping_) {
+    Client& client = *stepped;
     const std::string& id = client.session->client_id();
     for (int k = 0; k < client.stepped.size(); ++k) {
       const auto slot = static_cast<std::size_t>(k);
@@ -461,7 +461,9 @@ void ServerLoop::StepQueued() {
         client.session->last_output().device_force_n.allFinite() == false) {
       Log(kLogFailure, "non-finite force for '" + id + "': last good force sent");
     }
-    if (client.session->counters().beyond_compliance_range == 1 && client.session->last_output().compliance_out_of_range) {
+    // Once per client: several poses can be stepped between two of these checks (a burst).
+    if (!client.range_logged && client.session->counters().beyond_compliance_range > 0) {
+      client.range_logged = true;
       Log(kLogFailure, "a step of '" + id +
                            "' needed obstacle node pairs beyond contact.compliance_range_m (read as zero, so its force is "
                            "approximate): raise the range; further such steps are counted in the summary");

@@ -107,6 +107,7 @@ class ServerLoop {
     // (DevicePose.recent) at or before it are never looked at again.
     uint64_t newest_seen = 0;
     bool seen_any = false;
+    bool range_logged = false;  // the first step beyond contact.compliance_range_m was logged
     // client_time_ns of the first pose queued since the session opened or was reset (-1: none).
     int64_t first_client_time_ns = -1;
     // client_time_ns of the newest SESSION_JOIN this session took (-1: opened by a pose).
