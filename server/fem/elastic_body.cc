@@ -368,24 +368,11 @@ Eigen::MatrixXd ElasticBody::ComplianceBlockBySolves(std::span<const int> nodes)
   const int nf = num_free_dofs();
   Eigen::MatrixXd c = Eigen::MatrixXd::Zero(3 * s, 3 * s);
   if (nf == 0 || s == 0) return c;
-  // Free columns of the block: (position in the block, free dof index).
-  std::vector<std::pair<int, int>> columns;
-  for (int j = 0; j < s; ++j)
-    for (int b = 0; b < 3; ++b) {
-      const int f = dof_to_free_[static_cast<std::size_t>(3 * nodes[static_cast<std::size_t>(j)] + b)];
-      if (f >= 0) columns.emplace_back(3 * j + b, f);
-    }
-  // Chunk width: two nf x chunk dense arrays (rhs and solution) of at most ~32 MB each.
-  const int max_chunk = std::clamp(static_cast<int>(4'000'000 / nf), 1, 512);
-  const int total = static_cast<int>(columns.size());
-  for (int start = 0; start < total; start += max_chunk) {
-    const int width = std::min(max_chunk, total - start);
-    Eigen::MatrixXd rhs = Eigen::MatrixXd::Zero(nf, width);
-    for (int k = 0; k < width; ++k) rhs(columns[static_cast<std::size_t>(start + k)].second, k) = 1.0;
-    const Eigen::MatrixXd x = SolveFree(rhs);
-    for (int k = 0; k < width; ++k)
-      for (const auto& [block_row, f] : columns) c(block_row, columns[static_cast<std::size_t>(start + k)].first) = x(f, k);
-  }
+  // Chunk width: two nf x 3·chunk dense arrays (rhs and solution) of at most ~32 MB each.
+  const int chunk_nodes = std::clamp(4'000'000 / (3 * nf), 1, 170);
+  ForEachComplianceColumnChunk(nodes, chunk_nodes, [&](int first, int count, const Eigen::MatrixXd& columns) {
+    c.middleCols(3 * first, 3 * count) = columns;
+  });
   return c;
 }
 
@@ -412,10 +399,6 @@ void ElasticBody::ForEachComplianceColumnChunk(
         for (int a = 0; a < 3; ++a) {
           const int f = dof_to_free_[static_cast<std::size_t>(3 * nodes[static_cast<std::size_t>(i)] + a)];
           if (f >= 0) columns.row(3 * i + a) = x.row(f);
-        }
-      for (int k = 0; k < count; ++k)
-        for (int b = 0; b < 3; ++b) {
-          if (rhs.col(3 * k + b).isZero(0.0)) columns.col(3 * k + b).setZero();
         }
     }
     sink(first, count, columns);
