@@ -58,7 +58,8 @@ class BlockedCompliance {
   // Memory the blocks take, bytes: 72 n² when dense; banded, the pages of the stored blocks.
   std::size_t bytes() const;
   // What the same compliance takes dense: 72 n² bytes.
-  std::size_t dense_bytes() const { return sizeof(double) * 9 * static_cast<std::size_t>(nodes_) * static_cast<std::size_t>(nodes_); }
+  std::size_t dense_bytes() const { return DenseBytes(nodes_); }
+  static std::size_t DenseBytes(std::size_t nodes) { return sizeof(double) * 9 * nodes * nodes; }
   // C(i, j), m/N: displacement of node i per unit force at node j.
   Eigen::Map<const Eigen::Matrix3d> block(int i, int j) const {
     return Eigen::Map<const Eigen::Matrix3d>(data_.get() + Offset(i, j));

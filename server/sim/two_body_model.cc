@@ -225,14 +225,11 @@ struct TwoBodyModel::Parts {
   int obstacle_range_axis = -1;  // banded obstacle compliance: its axis and range, m
   double obstacle_range_m = 0.0;
   bool range_automatic = false;
-  std::size_t obstacle_dense_bytes = 0;
 };
 
 namespace {
 
 constexpr std::size_t kReleaseSchurFactorAboveBytes = std::size_t{512} << 20;
-
-std::size_t DenseBytes(std::size_t nodes) { return sizeof(double) * 9 * nodes * nodes; }
 
 // The memory the operators may take, bytes (nullopt: nothing to judge by), and its source.
 // The blocks take 72 n² bytes per surface of n nodes, and each body's factor keeps the Schur
@@ -327,8 +324,8 @@ TwoBodyModel::Parts TwoBodyModel::MakeParts(SceneSpec scene, std::size_t max_ope
   }
   std::string limit_source;
   const std::optional<std::size_t> limit = OperatorLimit(max_operator_bytes, &limit_source);
-  const std::size_t obstacle_dense = DenseBytes(obstacle_candidates.size());
-  const std::size_t tool_bytes = DenseBytes(tool_candidates.size());
+  const std::size_t obstacle_dense = BlockedCompliance::DenseBytes(obstacle_candidates.size());
+  const std::size_t tool_bytes = BlockedCompliance::DenseBytes(tool_candidates.size());
   double range_m = scene.compliance_range_m;
   bool automatic = false;
   if (range_m == 0.0 && limit && obstacle_dense + tool_bytes > *limit) {
@@ -361,7 +358,6 @@ TwoBodyModel::Parts TwoBodyModel::MakeParts(SceneSpec scene, std::size_t max_ope
   parts.obstacle_range_axis = axis;
   parts.obstacle_range_m = range_m;
   parts.range_automatic = automatic;
-  parts.obstacle_dense_bytes = obstacle_dense;
   return parts;
 }
 
@@ -381,7 +377,6 @@ TwoBodyModel::TwoBodyModel(Parts parts)
                                       parts.obstacle_range_axis);
   obstacle_surface_.range_axis = parts.obstacle_range_axis;
   obstacle_surface_.range_m = parts.obstacle_range_m;
-  stats_.obstacle_dense_bytes = parts.obstacle_dense_bytes;
   stats_.range_chosen_automatically = parts.range_automatic;
   tool_surface_ = DescribeSurface(tool_mesh, std::move(parts.tool_faces), scene_.quadratic_face_subtriangles);
   // Reverse-pass slaves: the sharp-edge nodes, or every candidate node (full two-pass).

@@ -79,9 +79,8 @@ struct TwoBodyModelStats {
   double compliance_seconds = 0.0;  // both compliance blocks, s
   double total_seconds = 0.0;
   std::size_t operator_bytes = 0;   // memory held by the precomputed dense operators, bytes
-  // What the obstacle's compliance would take dense, bytes, and whether the range was chosen
-  // because that did not fit (SceneSpec::compliance_range_m = 0).
-  std::size_t obstacle_dense_bytes = 0;
+  // Whether the obstacle's compliance range was chosen because its dense blocks did not fit
+  // (SceneSpec::compliance_range_m = 0).
   bool range_chosen_automatically = false;
 };
 

@@ -127,7 +127,7 @@ TEST(FreeInteractionTest, OversizedOperatorsAreBandedOrRefusedBeforeAllocation) 
     EXPECT_TRUE(model.stats().range_chosen_automatically);
     EXPECT_EQ(model.obstacle_surface().range_axis, 0) << "the bar's long axis";
     EXPECT_NEAR(model.obstacle_surface().range_m, 3 * 0.02, 1e-12) << "3 x the tool's 2 cm";
-    EXPECT_LT(model.obstacle_compliance_m_per_n().bytes(), model.stats().obstacle_dense_bytes);
+    EXPECT_LT(model.obstacle_compliance_m_per_n().bytes(), model.obstacle_compliance_m_per_n().dense_bytes());
   }
   try {
     const TwoBodyModel model(scene, 1'000'000);
