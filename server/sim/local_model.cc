@@ -9,7 +9,8 @@
 
 namespace hapco::sim {
 
-LocalModelBuilder::LocalModelBuilder(double surface_reach_m) : surface_reach_m_(surface_reach_m) {
+LocalModelBuilder::LocalModelBuilder(double surface_reach_m, Sliding sliding)
+    : surface_reach_m_(surface_reach_m), sliding_(sliding) {
   HAPCO_ASSERT(std::isfinite(surface_reach_m) && surface_reach_m >= 0.0, "surface reach must be finite and >= 0");
 }
 
@@ -73,8 +74,14 @@ void LocalModelBuilder::LinearizeContacts(const TwoBodySession& session) {
     const ContactSample sample = session.SampleContact(alpha);
     const Eigen::Vector3d r = result.force_n.segment<3>(3 * alpha);
     normal_force_n += r[0] * sample.normal;
-    if (sample.state == contact::ContactState::kSticking) {
-      ++model.sticking;
+    const bool stick_like = sample.state == contact::ContactState::kSticking ||
+                            (sample.state == contact::ContactState::kSliding && sliding_ == Sliding::kAsSticking);
+    if (stick_like) {
+      if (sample.state == contact::ContactState::kSticking) {
+        ++model.sticking;
+      } else {
+        ++model.sliding;
+      }
       for (int k = 0; k < 3; ++k) {
         unknowns_.push_back({alpha, Eigen::Vector3d::Unit(k)});
         rows_.push_back(3 * alpha + k);

@@ -75,7 +75,12 @@ class LocalModelBuilder {
   // last one, or after this many steps (the client extrapolates the same way).
   static constexpr double kSurfaceResearchDistanceM = 0.0005;
   static constexpr int kSurfaceResearchSteps = 20;
-  explicit LocalModelBuilder(double surface_reach_m = kDefaultSurfaceReachM);
+  // How sliding contacts are linearized. kOnTheCone (the clients' model): r stays on the cone
+  // along the solution's slip direction. kAsSticking: as if they stuck (u = 0, r free), the
+  // trial state of a return mapping; multirate.h projects the resulting force back onto the
+  // friction cone, which also turns the friction when the device changes direction.
+  enum class Sliding { kOnTheCone, kAsSticking };
+  explicit LocalModelBuilder(double surface_reach_m = kDefaultSurfaceReachM, Sliding sliding = Sliding::kOnTheCone);
 
   // Builds the surface-ahead search for `model` now (its trees and buffers), so that a
   // session's 1 kHz path never does; Linearize builds it on first need otherwise (offline).
@@ -93,6 +98,7 @@ class LocalModelBuilder {
   };
   LocalContactModel model_;
   double surface_reach_m_;
+  Sliding sliding_;
   std::optional<SurfaceAheadProbe> surface_probe_;  // built for the first session's model
   const TwoBodyModel* probe_model_ = nullptr;
   SurfaceAhead last_surface_;                                     // of the last search
