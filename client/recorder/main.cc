@@ -141,6 +141,12 @@ class Recorder {
   void OnForce(const hapco_idl_FeedbackForce& force) {
     // A notice that the server ignored a pose answers no step: nothing to record.
     if (force.pose_verdict != hapco_idl_POSE_STEPPED) return;
+    // A server's answer between steps (--physics-every > 1) has no frame and no contact state
+    // of its own: counted, not recorded as a step (docs/recorder.md).
+    if (force.answer_source != hapco_idl_ANSWER_STEP) {
+      ++model_answers_;
+      return;
+    }
     ++forces_seen_;
     ClientState& c = StateOf(force.client_id, force.server_id);
     // Arrived after its frame (recorded already): a sequence at most kLateWindow below the
@@ -256,6 +262,7 @@ class Recorder {
   uint64_t status_records() const { return status_records_; }
   uint64_t from_forces() const { return from_forces_; }
   uint64_t repeated_frames() const { return repeated_frames_; }
+  uint64_t model_answers() const { return model_answers_; }
   std::size_t clients() const { return client_ids_.size(); }
 
  private:
@@ -336,7 +343,8 @@ class Recorder {
   std::string key_;  // reused: no allocation per sample for a known stream
   std::map<std::string, ClientState> clients_;
   std::set<std::string> client_ids_;
-  uint64_t steps_ = 0, missing_steps_ = 0, forces_seen_ = 0, status_records_ = 0, from_forces_ = 0, repeated_frames_ = 0;
+  uint64_t steps_ = 0, missing_steps_ = 0, forces_seen_ = 0, status_records_ = 0, from_forces_ = 0, repeated_frames_ = 0,
+           model_answers_ = 0;
 };
 
 hapco::recording::Header MakeHeader(const Options& o) {
@@ -452,6 +460,11 @@ int Run(const Options& o) {
               static_cast<unsigned long long>(recorder.from_forces()),
               static_cast<unsigned long long>(recorder.repeated_frames()),
               stop_signals.ReceivedName("--duration-s"));
+  if (recorder.model_answers() > 0) {
+    std::printf("hapco-recorder: %llu forces answered between steps by the server's local model (--physics-every), "
+                "not recorded as steps\n",
+                static_cast<unsigned long long>(recorder.model_answers()));
+  }
   return 0;
 }
 

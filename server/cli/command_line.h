@@ -90,6 +90,9 @@ class CommandLine {
   // --workspace-m X and --max-jump-m X: the pose checks of hapco-server (sim/pose_limits.h).
   CLI::Option* AddWorkspace(double* metres, const std::string& help);
   CLI::Option* AddMaxJump(double* metres, const std::string& help);
+  // --physics-every K and --model-distance-m X: multirate answering (sim/multirate.h), group
+  // "Multirate"; the same meaning in hapco-server and hapco-sim.
+  void AddMultirate(int* physics_every, double* max_model_distance_m);
 
   // `old_name` (e.g. "--record") keeps working as `current_name` ("--output"), with a note on
   // stderr. An empty current_name drops the flag, so its value becomes a positional argument

@@ -153,7 +153,7 @@ ServerLoop::Client* ServerLoop::OpenSession(const std::string& client_id, const 
     Client client;
     client.session = std::make_unique<Session>(client_id, model, participant_, force_topic_, contact_topic_,
                                                options_.time_budget_s, options_.physics, options_.local_model,
-                                               options_.server_id);
+                                               options_.server_id, options_.multirate);
     auto [it, inserted] = sessions_.emplace(client_id, std::move(client));
     HAPCO_ASSERT(inserted, "OpenSession: session exists already");
     ++counters_.sessions_opened;
@@ -169,6 +169,7 @@ ServerLoop::Client* ServerLoop::OpenSession(const std::string& client_id, const 
 void ServerLoop::CloseSession(std::map<std::string, Client>::iterator it) {
   const SessionCounters& c = it->second.session->counters();
   closed_session_counters_.steps += c.steps;
+  closed_session_counters_.model_answers += c.model_answers;
   closed_session_counters_.non_finite_forces += c.non_finite_forces;
   closed_session_counters_.beyond_compliance_range += c.beyond_compliance_range;
   closed_session_counters_.force_write_errors += c.force_write_errors;
@@ -477,6 +478,7 @@ ServerCounters ServerLoop::counters() const {
   for (const auto& [id, client] : sessions_) {
     const SessionCounters& live = client.session->counters();
     s.steps += live.steps;
+    s.model_answers += live.model_answers;
     s.non_finite_forces += live.non_finite_forces;
     s.beyond_compliance_range += live.beyond_compliance_range;
     s.force_write_errors += live.force_write_errors;
@@ -485,6 +487,7 @@ ServerCounters ServerLoop::counters() const {
     s.ignored_notices += live.ignored_notices;
   }
   c.steps = s.steps;
+  c.model_answers = s.model_answers;
   c.non_finite_forces = s.non_finite_forces;
   c.beyond_compliance_range = s.beyond_compliance_range;
   c.force_write_errors = s.force_write_errors;
@@ -605,6 +608,10 @@ std::string ServerLoop::Summary() const {
                 static_cast<unsigned long long>(c.poses_for_other_servers),
                 static_cast<unsigned long long>(c.sessions_moved_away));
   std::string summary = line;
+  if (options_.multirate.physics_every > 1) {
+    summary += "; poses answered by the local model between steps (--physics-every " +
+               std::to_string(options_.multirate.physics_every) + ") " + std::to_string(c.model_answers);
+  }
   if (c.beyond_compliance_range > 0) {
     summary += "; steps beyond contact.compliance_range_m " + std::to_string(c.beyond_compliance_range);
   }

@@ -40,6 +40,9 @@ struct ServerOptions {
   // ~5 % of a step (docs/network-haptics.md); clients rendering in local-model mode need it.
   bool local_model = true;
   PoseLimits limits;
+  // physics_every > 1: a contact step on every pose only where the last step's local model
+  // cannot answer it, at least every physics_every poses (sim/multirate.h). 1: every pose.
+  sim::MultirateParameters multirate;
   // Solver wall-clock budget per step, s (0 = none); < 0 keeps the scene's. A step that
   // runs out returns SOLVER_TIME_BUDGET_EXCEEDED with the forces it has.
   double time_budget_s = -1.0;
@@ -57,6 +60,7 @@ struct ServerCounters {
   uint64_t refused_sessions = 0;    // --max-sessions reached; also in input.unknown_clients
   uint64_t superseded = 0;          // older poses of a client replaced by a newer one in a batch
   uint64_t steps = 0;
+  uint64_t model_answers = 0;       // poses answered by the local model between steps (--physics-every)
   uint64_t non_finite_forces = 0;   // solve gave NaN/Inf; the last good force was sent
   uint64_t beyond_compliance_range = 0;  // steps that needed a pair beyond contact.compliance_range_m
   uint64_t force_write_errors = 0;

@@ -31,11 +31,13 @@ Session::Session(std::string client_id, const sim::TwoBodyModel& model,
                  const Participant& participant,
                  const Topic<hapco_idl_FeedbackForce>& force_topic,
                  const Topic<hapco_idl_ContactStateFrame>& contact_topic, double time_budget_s,
-                 SessionPhysics physics, bool local_model, std::string_view server_id)
+                 SessionPhysics physics, bool local_model, std::string_view server_id,
+                 sim::MultirateParameters multirate)
     : client_id_(std::move(client_id)),
       physics_(physics),
       local_model_(local_model),
       sim_(model),
+      answerer_(sim_, local_model_builder_, multirate),
       publisher_(participant, ClientPartition(client_id_)),
       force_topic_(&force_topic),
       contact_writer_(publisher_, contact_topic),
@@ -43,7 +45,9 @@ Session::Session(std::string client_id, const sim::TwoBodyModel& model,
       frame_(MakeSample<hapco_idl_ContactStateFrame>()) {
   if (time_budget_s >= 0) sim_.parameters.time_budget_s = time_budget_s;
   // The surface-ahead search's trees are built here, not on the session's first 1 kHz step.
-  if (local_model_ && physics_ == SessionPhysics::kContact) local_model_builder_.Prepare(model);
+  if ((local_model_ || multirate.physics_every > 1) && physics_ == SessionPhysics::kContact) {
+    local_model_builder_.Prepare(model);
+  }
   SetClientId(force_.client_id, client_id_);
   SetClientId(frame_->client_id, client_id_);
   // The answering server in every force and frame: a client (and a recorder) sees when it
@@ -74,11 +78,24 @@ int64_t Session::StepAndPublish(const hapco_idl_DevicePose& pose, int64_t receiv
   counters_.sequence_gaps += stream_.Accept(pose);
   static const sim::StepOutput kNoPhysics{};  // zero force, no contact, step 0
   const int64_t start_ns = MonotonicNowNs();
-  const sim::StepOutput& out = physics_ == SessionPhysics::kContact ? sim_.Step(p) : kNoPhysics;
+  // Multirate (sim/multirate.h): the answerer steps and linearizes, or answers from the model.
+  const bool multirate = physics_ == SessionPhysics::kContact && answerer_.parameters().physics_every > 1;
+  sim::MultirateAnswer answer;
+  if (multirate) {
+    answer = answerer_.Answer(p);
+  } else if (physics_ == SessionPhysics::kContact) {
+    sim_.Step(p);
+  }
+  const sim::StepOutput& out = physics_ == SessionPhysics::kContact ? sim_.last_output() : kNoPhysics;
+  const bool stepped = answer.source == sim::AnswerSource::kStep;
   const int64_t physics_ns = MonotonicNowNs();
-  ++counters_.steps;
-  if (out.compliance_out_of_range) ++counters_.beyond_compliance_range;
-  Eigen::Vector3d force_n = out.device_force_n;
+  Eigen::Vector3d force_n = stepped ? out.device_force_n : answer.device_force_n;
+  if (stepped) {
+    ++counters_.steps;
+    if (out.compliance_out_of_range) ++counters_.beyond_compliance_range;
+  } else {
+    ++counters_.model_answers;
+  }
   const bool force_finite = force_n.allFinite();
   if (!force_finite) {
     // Never send a NaN: the last good force, counted. (The next steps may recover: the
@@ -92,14 +109,24 @@ int64_t Session::StepAndPublish(const hapco_idl_DevicePose& pose, int64_t receiv
   force_.client_time_ns = pose.client_time_ns;
   force_.server_receive_ns = receive_ns;
   force_.force_n = ToIdl(force_n);
-  force_.solver_status = ToIdl(out.status, out.num_contacts);
-  force_.iterations = static_cast<uint32_t>(std::max(0, out.iterations));
-  force_.separating_count = static_cast<uint32_t>(out.state_counts[0]);
-  force_.sticking_count = static_cast<uint32_t>(out.state_counts[1]);
-  force_.sliding_count = static_cast<uint32_t>(out.state_counts[2]);
   force_.pose_verdict = hapco_idl_POSE_STEPPED;
   force_.ignored_poses = counters_.ignored_poses;
-  FillLocalModel(force_finite);
+  switch (answer.source) {
+    case sim::AnswerSource::kStep: force_.answer_source = hapco_idl_ANSWER_STEP; break;
+    case sim::AnswerSource::kModel: force_.answer_source = hapco_idl_ANSWER_MODEL; break;
+    case sim::AnswerSource::kApart: force_.answer_source = hapco_idl_ANSWER_APART; break;
+  }
+  if (stepped) {
+    force_.solver_status = ToIdl(out.status, out.num_contacts);
+    force_.iterations = static_cast<uint32_t>(std::max(0, out.iterations));
+    force_.separating_count = static_cast<uint32_t>(out.state_counts[0]);
+    force_.sticking_count = static_cast<uint32_t>(out.state_counts[1]);
+    force_.sliding_count = static_cast<uint32_t>(out.state_counts[2]);
+    // (The multirate answerer has linearized this step already.)
+    FillLocalModel(force_finite, /*linearized=*/multirate);
+  } else {
+    force_.iterations = 0;  // the status, contact counts and model stay the step's
+  }
   force_.server_send_ns = MonotonicNowNs();
   if (force_writer_->Write(force_) != DDS_RETCODE_OK) ++counters_.force_write_errors;
   const int64_t written_ns = MonotonicNowNs();
@@ -107,6 +134,14 @@ int64_t Session::StepAndPublish(const hapco_idl_DevicePose& pose, int64_t receiv
   std::move_backward(force_.recent, force_.recent + hapco_idl_RECENT_SAMPLES - 1, force_.recent + hapco_idl_RECENT_SAMPLES);
   force_.recent[0] = {force_.pose_sequence, force_.client_time_ns, force_.force_n};
   force_.recent_count = std::min<uint32_t>(force_.recent_count + 1, hapco_idl_RECENT_SAMPLES);
+  if (!stepped) {
+    // A model answer has no contact state of its own: no frame (the recorder counts it).
+    stage_times_.physics_ns += physics_ns - start_ns;
+    stage_times_.force_write_ns += written_ns - force_.server_send_ns;
+    stage_times_.model_ns += force_.server_send_ns - physics_ns;
+    ++stage_times_.poses;
+    return written_ns - receive_ns;
+  }
   // The contact frame goes after the force: the force is the latency-critical sample.
   FillContactFrame(pose.sequence_number);
   frame_->server_receive_ns = receive_ns;
@@ -164,14 +199,14 @@ void Session::NotifyIgnored(const hapco_idl_DevicePose& pose, int64_t receive_ns
   }
 }
 
-void Session::FillLocalModel(bool force_is_from_this_step) {
+void Session::FillLocalModel(bool force_is_from_this_step, bool linearized) {
   hapco_idl_LocalContactModel& m = force_.model;
   m = hapco_idl_LocalContactModel{};
   if (!local_model_ || physics_ != SessionPhysics::kContact || !force_is_from_this_step) return;
   // The pose answered, also without a model: a client keeps its model when that pose is
   // outside the model's surface (client/phantom/force_renderer.h).
   m.position_m = ToIdl(sim_.last_output().device_translation_m);
-  const sim::LocalContactModel& local = local_model_builder_.Linearize(sim_);
+  const sim::LocalContactModel& local = linearized ? local_model_builder_.model() : local_model_builder_.Linearize(sim_);
   if (local.surface_ahead && local.surface_normal.allFinite() && std::isfinite(local.surface_gap_m)) {
     m.surface_ahead = true;
     m.surface_gap_m = local.surface_gap_m;
@@ -222,6 +257,7 @@ void Session::FillContactFrame(uint64_t pose_sequence) {
 
 void Session::Reset() {
   sim_.Reset();
+  answerer_.Reset();
   stream_.Reset();
   last_good_force_n_.setZero();
   any_notice_ = false;

@@ -13,6 +13,7 @@
 #include "hapco_types.h"
 #include "service/dds.h"
 #include "sim/local_model.h"
+#include "sim/multirate.h"
 #include "sim/step_pipeline.h"
 #include "sim/pose_limits.h"
 #include "service/pose_intake.h"
@@ -27,6 +28,7 @@ using sim::PoseVerdict;
 // Per-session counters of what the server did with this client's poses and samples.
 struct SessionCounters {
   uint64_t steps = 0;
+  uint64_t model_answers = 0;          // poses answered between steps (--physics-every > 1)
   uint64_t non_finite_forces = 0;      // solve gave NaN/Inf: the last good force was sent
   uint64_t beyond_compliance_range = 0;  // steps that needed a pair beyond a banded compliance
   uint64_t force_write_errors = 0;
@@ -57,12 +59,13 @@ enum class SessionPhysics { kContact, kNone };
 class Session {
  public:
   // Throws DdsError if the writers cannot be created. time_budget_s >= 0 replaces the scene's
-  // solver time budget (the haptic deadline; 0 = none), < 0 keeps the scene's.
+  // solver time budget (the haptic deadline; 0 = none), < 0 keeps the scene's. multirate:
+  // physics_every > 1 answers some poses with the last step's local model (sim/multirate.h).
   Session(std::string client_id, const sim::TwoBodyModel& model, const Participant& participant,
           const Topic<hapco_idl_FeedbackForce>& force_topic,
           const Topic<hapco_idl_ContactStateFrame>& contact_topic, double time_budget_s = -1.0,
           SessionPhysics physics = SessionPhysics::kContact, bool local_model = true,
-          std::string_view server_id = {});
+          std::string_view server_id = {}, sim::MultirateParameters multirate = {});
 
   const std::string& client_id() const { return client_id_; }
 
@@ -83,8 +86,9 @@ class Session {
   PoseVerdict Check(const hapco_idl_DevicePose& pose, int64_t receive_ns, const PoseLimits& limits,
                     const hapco_idl_DevicePose* pending = nullptr);
 
-  // One haptic step for an accepted pose, then the force (and contact frame) is written.
-  // Returns the step wall time in ns (solve + publish).
+  // One haptic step for an accepted pose, then the force (and contact frame) is written; with
+  // --physics-every > 1 a pose between steps may be answered by the last step's local model
+  // instead (a force, no frame). Returns the wall time in ns (pose received -> published).
   int64_t StepAndPublish(const hapco_idl_DevicePose& pose, int64_t receive_ns);
 
   // Counts a pose the server ignores (not finite, outside the workspace, a jump) and tells
@@ -113,14 +117,16 @@ class Session {
 
  private:
   void FillContactFrame(uint64_t pose_sequence);
-  // FeedbackForce.model from the step just made (invalid without contact force).
-  void FillLocalModel(bool force_is_from_this_step);
+  // FeedbackForce.model from the step just made (invalid without contact force); linearized:
+  // the builder holds this step's model already.
+  void FillLocalModel(bool force_is_from_this_step, bool linearized);
 
   std::string client_id_;
   SessionPhysics physics_;
   bool local_model_;
   sim::TwoBodySession sim_;
   sim::LocalModelBuilder local_model_builder_;
+  sim::MultirateAnswerer answerer_;  // on sim_ and local_model_builder_
   Publisher publisher_;
   const Topic<hapco_idl_FeedbackForce>* force_topic_;
   Writer<hapco_idl_ContactStateFrame> contact_writer_;

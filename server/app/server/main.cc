@@ -106,6 +106,7 @@ bool Parse(int argc, char** argv, Options* options) {
                   "do not send the contact's local model (stiffness, normal, friction) with the forces: saves "
                   "~5 % of a step; clients then render forces as they come (hapco-phantom --render)",
                   "Sessions");
+  command.AddMultirate(&options->server.multirate.physics_every, &options->server.multirate.max_model_distance_m);
   command.AddMaxJump(&options->server.limits.max_jump_m,
                      "largest plausible position change per pose, m (default 0.002); a larger jump is ignored "
                      "(the client keeps its last force and is told)");
@@ -195,6 +196,11 @@ int Run(const Options& options) {
               server_options.threads > 1 ? "s" : "",
               server_options.physics == hapco::service::SessionPhysics::kNone ? ", physics none (zero force)" : "",
               hapco::sim::ComplianceKernelName(hapco::sim::FastestComplianceKernel()), setup.ElapsedSeconds());
+  if (server_options.multirate.physics_every > 1 && server_options.physics == hapco::service::SessionPhysics::kContact) {
+    std::printf("hapco-server: multirate: a contact step on at least every %d poses, the poses between answered by the "
+                "last step's local model within %.3g m of its pose (sim/multirate.h)\n",
+                server_options.multirate.physics_every, server_options.multirate.max_model_distance_m);
+  }
   std::fflush(stdout);
 
   const auto watching = stop_signals.Watch([&server] { server.RequestStop(); });

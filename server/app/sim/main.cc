@@ -26,6 +26,8 @@
 #include "io/scene_file.h"
 #include "io/trajectory_file.h"
 #include "sim/pose_limits.h"
+#include "sim/multirate.h"
+#include "sim/local_model.h"
 #include "io/recording.h"
 #include "io/vtk_export.h"
 #include "sim/step_pipeline.h"
@@ -42,6 +44,7 @@ struct Options {
   std::string scene_path, csv_path, vtk_dir, output_path, solver_name, compliance = "precomputed", trajectory_path,
       client_id;
   hapco::sim::PoseLimits limits;
+  hapco::sim::MultirateParameters multirate;
   double tolerance_m = 0, friction = -1, rho_scale = 1;
   std::string fclib_dir;
   int max_iterations = 0, steps = 0, vtk_every = 10, fclib_every = 10, anderson_depth = -1;
@@ -87,6 +90,7 @@ bool Parse(int argc, char** argv, Options* options) {
   command.AddMaxJump(&options->limits.max_jump_m,
                      "a pose farther than X m from the last stepped one (x the sequence gap, at most 10) is "
                      "ignored, as by hapco-server (default 0.002)");
+  command.AddMultirate(&options->multirate.physics_every, &options->multirate.max_model_distance_m);
   command.AddOutput(&options->output_path,
                     "write a HapCo recording: a header with the scene, one record per step with forces, contact "
                     "states and timings; read it with hapco-report");
@@ -344,6 +348,12 @@ int Run(const Options& options) {
   // The server's plausibility checks (sim/pose_limits.h), so offline and online runs step the
   // same poses: a rejected pose is not stepped, as on the server.
   std::optional<hapco::sim::AcceptedPose> last_pose;
+  // --physics-every K > 1: the server's multirate answering (sim/multirate.h).
+  const bool multirate = options.multirate.physics_every > 1;
+  hapco::sim::LocalModelBuilder model_builder;
+  std::optional<hapco::sim::MultirateAnswerer> answerer;
+  if (multirate) answerer.emplace(session, model_builder, options.multirate);
+  long model_answers = 0;
   std::map<std::string, int> ignored;
   for (int step = 1; step <= steps; ++step) {
     const Eigen::Vector3d pose_m = translation_at(step);
@@ -354,8 +364,29 @@ int Run(const Options& options) {
       continue;
     }
     last_pose = hapco::sim::AcceptedPose{static_cast<std::uint64_t>(step), pose_m};
-    const auto& out = session.Step(pose_m);
     const int phase = file_points.empty() ? scene.PhaseOfStep(step) : 0;
+    if (multirate) {
+      // As hapco-server --physics-every: the pose may be answered by the last step's model.
+      const hapco::sim::MultirateAnswer answer = answerer->Answer(pose_m);
+      if (answer.source != hapco::sim::AnswerSource::kStep) {
+        ++model_answers;
+        const double gain = scene.force_gain;
+        const Eigen::Vector3d contact_n = gain != 0 ? Eigen::Vector3d(answer.device_force_n / gain) : Eigen::Vector3d::Zero();
+        peak_force_n = std::max(peak_force_n, contact_n.norm());
+        if (csv != nullptr) {
+          const auto& last = session.last_output();
+          std::fprintf(csv, "%d,%s,%.9g,%.9g,%.9g,%.12g,%.12g,%.12g,%.12g,%.12g,%.12g,%d,%d,%d,%d,0,0,0,0,0,0,0,0,0,%s\n",
+                       step, phase_name(phase).c_str(), pose_m.x(), pose_m.y(), pose_m.z(), contact_n.x(),
+                       contact_n.y(), contact_n.z(), answer.device_force_n.x(), answer.device_force_n.y(),
+                       answer.device_force_n.z(), last.num_contacts, last.state_counts[0], last.state_counts[1],
+                       last.state_counts[2], hapco::sim::AnswerSourceName(answer.source));
+        }
+        continue;
+      }
+    } else {
+      session.Step(pose_m);
+    }
+    const auto& out = session.last_output();
     if (out.status != hapco::contact::SolverStatus::kConverged) ++not_converged;
     if (out.compliance_out_of_range) ++out_of_range;
     peak_force_n = std::max(peak_force_n, out.contact_force_n.norm());
@@ -401,6 +432,11 @@ int Run(const Options& options) {
   }
   std::printf("%d steps in %.2f s: peak contact force %.3f N, %ld outer iterations, %d not converged\n",
               steps, run.ElapsedSeconds(), peak_force_n, total_iterations, not_converged);
+  if (multirate) {
+    std::printf("multirate (--physics-every %d, --model-distance-m %.3g): %ld of the poses answered by the last "
+                "step's local model (status model / apart in the CSV), the others stepped\n",
+                options.multirate.physics_every, options.multirate.max_model_distance_m, model_answers);
+  }
   if (model.obstacle_surface().range_axis >= 0) {
     std::printf("compliance range %.3g m: %d steps needed a node pair beyond it%s\n", model.obstacle_surface().range_m,
                 out_of_range, out_of_range > 0 ? " (read as zero: raise contact.compliance_range_m)" : "");

@@ -25,6 +25,8 @@
 #include "io/scene_file.h"
 #include "service/config.h"
 #include "service/dds.h"
+#include "sim/local_model.h"
+#include "sim/multirate.h"
 #include "sim/step_pipeline.h"
 #include "../process_support.h"
 
@@ -365,6 +367,67 @@ TEST(ServerProcess, PhysicsNoneAnswersEveryStepWithAZeroForce) {
     ++received;
   }
   EXPECT_GE(received, 270);
+}
+
+// Multirate (hapco-server --physics-every 4, sim/multirate.h): every pose is answered, most
+// between steps by the last step's local model, and the forces a phantom receives are those of
+// an offline MultirateAnswerer fed exactly the poses the server traced. A recorder keeps every
+// step (no step missing) and counts the model answers apart.
+TEST(ServerProcess, MultirateAnswersAreTheOfflineMultirateReplay) {
+  const std::string dir = TestDir();
+  const std::string domain = std::to_string(SetUpTestDomain());
+  Process server({HAPCO_SERVER_EXE, kScene, "--domain", domain, "--physics-every", "4", "--trace", dir + "/trace.csv"},
+                 dir + "/server.out", dir + "/server.err");
+  Process recorder({HAPCO_RECORDER_EXE, kScene, "--output", dir + "/multirate.hapco", "--domain", domain},
+                   dir + "/recorder.out", dir + "/recorder.err");
+  ASSERT_TRUE(WaitForText(dir + "/recorder.out", "found", 60'000)) << ReadFile(dir + "/recorder.err");
+  {
+    Process phantom({HAPCO_PHANTOM_EXE, kScene, "--client-id", "multirate-1", "--domain", domain, "--csv",
+                     dir + "/phantom.csv", "--connect-timeout-s", "60"},
+                    dir + "/phantom.out", dir + "/phantom.err");
+    ASSERT_EQ(phantom.Wait(120'000), 0) << ReadFile(dir + "/phantom.err");
+  }
+  server.Signal(SIGTERM);
+  ASSERT_EQ(server.Wait(30'000), 0) << ReadFile(dir + "/server.err");
+  recorder.Signal(SIGTERM);
+  ASSERT_EQ(recorder.Wait(30'000), 0) << ReadFile(dir + "/recorder.err");
+  const std::string server_out = ReadFile(dir + "/server.out");
+  const std::string recorder_out = ReadFile(dir + "/recorder.out");
+  std::printf("%s%s", server_out.c_str(), recorder_out.c_str());
+
+  // The replay: the same answerer on exactly the traced poses, in order.
+  const sim::TwoBodyModel model(io::LoadSceneFile(kScene));
+  sim::TwoBodySession session(model);
+  sim::LocalModelBuilder builder;
+  sim::MultirateParameters parameters;
+  parameters.physics_every = 4;
+  sim::MultirateAnswerer answerer(session, builder, parameters);
+  std::map<uint64_t, Eigen::Vector3d> expected;
+  unsigned long long replay_steps = 0, replay_model = 0;
+  for (const auto& row : ReadCsv(dir + "/trace.csv")) {
+    const sim::MultirateAnswer answer = answerer.Answer(Vec(row, "x_m", "y_m", "z_m"));
+    (answer.source == sim::AnswerSource::kStep ? replay_steps : replay_model) += 1;
+    expected[std::stoull(row.at("sequence"))] = answer.device_force_n;
+    EXPECT_TRUE(SameForce(Vec(row, "fx_n", "fy_n", "fz_n"), answer.device_force_n)) << row.at("sequence");
+  }
+  ASSERT_GE(expected.size(), 280u) << "of the scene's 310 poses";
+  EXPECT_GT(replay_model, replay_steps) << "most poses are answered between steps";
+  EXPECT_NE(server_out.find(std::to_string(replay_steps) + " steps ("), std::string::npos) << server_out;
+  EXPECT_NE(server_out.find("(--physics-every 4) " + std::to_string(replay_model)), std::string::npos) << server_out;
+  int received = 0;
+  for (const auto& row : ReadCsv(dir + "/phantom.csv")) {
+    const long long s = std::stoll(row.at("force_sequence"));
+    if (s < 0) continue;
+    ASSERT_TRUE(expected.count(static_cast<uint64_t>(s))) << s;
+    EXPECT_TRUE(SameForce(Vec(row, "raw_fx_n", "raw_fy_n", "raw_fz_n"), expected[static_cast<uint64_t>(s)])) << s;
+    ++received;
+  }
+  EXPECT_GE(received, 270);
+  // The recorder: every step, none missing; the model answers counted, not taken for steps.
+  EXPECT_NE(recorder_out.find("hapco-recorder: " + std::to_string(replay_steps) + " steps from 1 clients, 0 missing steps"),
+            std::string::npos)
+      << recorder_out;
+  EXPECT_NE(recorder_out.find("forces answered between steps"), std::string::npos) << recorder_out;
 }
 
 // A banded compliance too short for the tool (contact.compliance_range_m below its extent):
