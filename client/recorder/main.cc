@@ -461,8 +461,8 @@ int Run(const Options& o) {
               static_cast<unsigned long long>(recorder.repeated_frames()),
               stop_signals.ReceivedName("--duration-s"));
   if (recorder.model_answers() > 0) {
-    std::printf("hapco-recorder: %llu forces answered between steps by the server's local model (--physics-every), "
-                "not recorded as steps\n",
+    std::printf("hapco-recorder: %llu forces answered between steps (hapco-server --physics-every: no contact state of "
+                "their own), not recorded as steps\n",
                 static_cast<unsigned long long>(recorder.model_answers()));
   }
   return 0;

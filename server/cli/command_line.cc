@@ -300,15 +300,15 @@ CLI::Option* CommandLine::AddMaxJump(double* metres, const std::string& help) {
 
 void CommandLine::AddMultirate(int* physics_every, double* max_model_distance_m) {
   AddInteger("--physics-every", physics_every, "K",
-             "a contact step on at least every K-th pose; the poses between are answered by the last step's "
-             "local contact model where it holds (in contact: within --model-distance-m of the step's pose, "
-             "contacts still pushing, friction by return mapping; apart: exactly zero while no gap can have "
-             "closed) and stepped where it does not. Fewer steps for a force error measured in "
-             "docs/load-and-network.md (default 1: a step on every pose)",
+             "multirate: a contact step on at least every K-th pose; a pose between, within --model-distance-m "
+             "of the last step's pose, is answered by that step's contacts solved again at the pose (in "
+             "contact), or zero while no gap can have closed (apart), and stepped otherwise; the device "
+             "turning gets a step at the turning pose. Fewer steps for a force error measured in "
+             "docs/load-and-network.md, \"Multirate\" (default 1: a step on every pose)",
              "Multirate", 1, 1000);
   AddNumber("--model-distance-m", max_model_distance_m, "X",
             "with --physics-every K > 1: a pose farther than X m from the last step's pose gets a step "
-            "(default 2e-4)",
+            "(default 5e-4)",
             "Multirate", 0, 0.1);
 }
 

@@ -170,6 +170,7 @@ void ServerLoop::CloseSession(std::map<std::string, Client>::iterator it) {
   const SessionCounters& c = it->second.session->counters();
   closed_session_counters_.steps += c.steps;
   closed_session_counters_.model_answers += c.model_answers;
+  closed_session_counters_.turn_steps += c.turn_steps;
   closed_session_counters_.non_finite_forces += c.non_finite_forces;
   closed_session_counters_.beyond_compliance_range += c.beyond_compliance_range;
   closed_session_counters_.force_write_errors += c.force_write_errors;
@@ -479,6 +480,7 @@ ServerCounters ServerLoop::counters() const {
     const SessionCounters& live = client.session->counters();
     s.steps += live.steps;
     s.model_answers += live.model_answers;
+    s.turn_steps += live.turn_steps;
     s.non_finite_forces += live.non_finite_forces;
     s.beyond_compliance_range += live.beyond_compliance_range;
     s.force_write_errors += live.force_write_errors;
@@ -488,6 +490,7 @@ ServerCounters ServerLoop::counters() const {
   }
   c.steps = s.steps;
   c.model_answers = s.model_answers;
+  c.turn_steps = s.turn_steps;
   c.non_finite_forces = s.non_finite_forces;
   c.beyond_compliance_range = s.beyond_compliance_range;
   c.force_write_errors = s.force_write_errors;
@@ -609,8 +612,8 @@ std::string ServerLoop::Summary() const {
                 static_cast<unsigned long long>(c.sessions_moved_away));
   std::string summary = line;
   if (options_.multirate.physics_every > 1) {
-    summary += "; poses answered by the local model between steps (--physics-every " +
-               std::to_string(options_.multirate.physics_every) + ") " + std::to_string(c.model_answers);
+    summary += "; poses answered between steps (--physics-every " + std::to_string(options_.multirate.physics_every) +
+               ") " + std::to_string(c.model_answers) + ", extra steps at turning poses " + std::to_string(c.turn_steps);
   }
   if (c.beyond_compliance_range > 0) {
     summary += "; steps beyond contact.compliance_range_m " + std::to_string(c.beyond_compliance_range);

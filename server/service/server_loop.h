@@ -60,7 +60,8 @@ struct ServerCounters {
   uint64_t refused_sessions = 0;    // --max-sessions reached; also in input.unknown_clients
   uint64_t superseded = 0;          // older poses of a client replaced by a newer one in a batch
   uint64_t steps = 0;
-  uint64_t model_answers = 0;       // poses answered by the local model between steps (--physics-every)
+  uint64_t model_answers = 0;       // poses answered between steps (--physics-every, sim/multirate.h)
+  uint64_t turn_steps = 0;          // steps taken at turning poses besides (not in `steps`)
   uint64_t non_finite_forces = 0;   // solve gave NaN/Inf; the last good force was sent
   uint64_t beyond_compliance_range = 0;  // steps that needed a pair beyond contact.compliance_range_m
   uint64_t force_write_errors = 0;

@@ -81,8 +81,11 @@ int64_t Session::StepAndPublish(const hapco_idl_DevicePose& pose, int64_t receiv
   // Multirate (sim/multirate.h): the answerer steps and linearizes, or answers from the model.
   const bool multirate = physics_ == SessionPhysics::kContact && answerer_.parameters().physics_every > 1;
   sim::MultirateAnswer answer;
+  bool turned = false;  // a step at the turning pose came before this answer (multirate.h)
   if (multirate) {
     answer = answerer_.Answer(p);
+    turned = static_cast<uint64_t>(answerer_.turn_steps()) != counters_.turn_steps;
+    counters_.turn_steps = static_cast<uint64_t>(answerer_.turn_steps());
   } else if (physics_ == SessionPhysics::kContact) {
     sim_.Step(p);
   }
@@ -125,7 +128,8 @@ int64_t Session::StepAndPublish(const hapco_idl_DevicePose& pose, int64_t receiv
     // (The multirate answerer has linearized this step already.)
     FillLocalModel(force_finite, /*linearized=*/multirate);
   } else {
-    force_.iterations = 0;  // the status, contact counts and model stay the step's
+    force_.iterations = 0;  // the status, contact counts and model stay the last step's
+    if (turned) FillLocalModel(out.device_force_n.allFinite(), /*linearized=*/true);  // the turn's step
   }
   force_.server_send_ns = MonotonicNowNs();
   if (force_writer_->Write(force_) != DDS_RETCODE_OK) ++counters_.force_write_errors;

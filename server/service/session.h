@@ -29,6 +29,7 @@ using sim::PoseVerdict;
 struct SessionCounters {
   uint64_t steps = 0;
   uint64_t model_answers = 0;          // poses answered between steps (--physics-every > 1)
+  uint64_t turn_steps = 0;             // of the steps, those taken at a turning pose (sim/multirate.h)
   uint64_t non_finite_forces = 0;      // solve gave NaN/Inf: the last good force was sent
   uint64_t beyond_compliance_range = 0;  // steps that needed a pair beyond a banded compliance
   uint64_t force_write_errors = 0;

@@ -100,17 +100,7 @@ void LocalModelBuilder::LinearizeContacts(const TwoBodySession& session) {
 
   // G = dq/dd (3m x 3), world axes: contact α's relative displacement moves with its tool
   // nodes' unit fields.
-  const Eigen::MatrixXd& unit_fields = session.model().tool_unit_fields();
-  g_.setZero(3 * m, 3);
-  for (int alpha = 0; alpha < m; ++alpha) {
-    const StepContact& c = contacts[static_cast<std::size_t>(alpha)];
-    Eigen::Matrix3d moved = Eigen::Matrix3d::Zero();
-    for (int k = 0; k < c.num_tool; ++k) {
-      moved += c.tool_coefficients[static_cast<std::size_t>(k)] *
-               unit_fields.block<3, 3>(3 * c.tool_slots[static_cast<std::size_t>(k)], 0);
-    }
-    g_.block<3, 3>(3 * alpha, 0) = c.frame * moved;
-  }
+  FreeDisplacementPerDeviceTranslation(session, &g_);
 
   // (E W B) dz/dd = -E G. B has one 3-vector per unknown, so W B is read from W's columns of
   // that contact (no dense product with B).
@@ -138,6 +128,22 @@ void LocalModelBuilder::LinearizeContacts(const TwoBodySession& session) {
     for (int k = 0; k < c.num_tool; ++k) weight += c.tool_coefficients[static_cast<std::size_t>(k)];
     const Eigen::RowVector3d dz_j = dz_.row(j);  // fixed size: no temporary on the heap
     model.stiffness_n_per_m.noalias() += (gain * weight) * (c.frame.transpose() * u.direction) * dz_j;
+  }
+}
+
+void FreeDisplacementPerDeviceTranslation(const TwoBodySession& session, Eigen::MatrixXd* g) {
+  const std::vector<StepContact>& contacts = session.contacts();
+  const int m = static_cast<int>(contacts.size());
+  const Eigen::MatrixXd& unit_fields = session.model().tool_unit_fields();
+  g->setZero(3 * m, 3);
+  for (int alpha = 0; alpha < m; ++alpha) {
+    const StepContact& c = contacts[static_cast<std::size_t>(alpha)];
+    Eigen::Matrix3d moved = Eigen::Matrix3d::Zero();
+    for (int k = 0; k < c.num_tool; ++k) {
+      moved += c.tool_coefficients[static_cast<std::size_t>(k)] *
+               unit_fields.block<3, 3>(3 * c.tool_slots[static_cast<std::size_t>(k)], 0);
+    }
+    g->block<3, 3>(3 * alpha, 0) = c.frame * moved;
   }
 }
 

@@ -110,6 +110,11 @@ class LocalModelBuilder {
   Eigen::PartialPivLU<Eigen::MatrixXd> lu_;
 };
 
+// G = dũ/dd (3m x 3, m/m) of the session's last step: how each contact's free relative
+// displacement (its local frame n, t1, t2) moves with the device translation, through its
+// tool nodes' unit fields (the obstacle side does not move with d within a step). Resizes *g.
+void FreeDisplacementPerDeviceTranslation(const TwoBodySession& session, Eigen::MatrixXd* g);
+
 // One-off form of LocalModelBuilder::Linearize (tests, offline tools).
 LocalContactModel LinearizeLastStep(const TwoBodySession& session);
 

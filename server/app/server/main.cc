@@ -197,8 +197,8 @@ int Run(const Options& options) {
               server_options.physics == hapco::service::SessionPhysics::kNone ? ", physics none (zero force)" : "",
               hapco::sim::ComplianceKernelName(hapco::sim::FastestComplianceKernel()), setup.ElapsedSeconds());
   if (server_options.multirate.physics_every > 1 && server_options.physics == hapco::service::SessionPhysics::kContact) {
-    std::printf("hapco-server: multirate: a contact step on at least every %d poses, the poses between answered by the "
-                "last step's local model within %.3g m of its pose (sim/multirate.h)\n",
+    std::printf("hapco-server: multirate: a contact step on at least every %d poses; the poses between, within %.3g m "
+                "of the last step's pose, answered by its contacts solved again there (sim/multirate.h)\n",
                 server_options.multirate.physics_every, server_options.multirate.max_model_distance_m);
   }
   std::fflush(stdout);

@@ -433,9 +433,10 @@ int Run(const Options& options) {
   std::printf("%d steps in %.2f s: peak contact force %.3f N, %ld outer iterations, %d not converged\n",
               steps, run.ElapsedSeconds(), peak_force_n, total_iterations, not_converged);
   if (multirate) {
-    std::printf("multirate (--physics-every %d, --model-distance-m %.3g): %ld of the poses answered by the last "
-                "step's local model (status model / apart in the CSV), the others stepped\n",
-                options.multirate.physics_every, options.multirate.max_model_distance_m, model_answers);
+    std::printf("multirate (--physics-every %d, --model-distance-m %.3g): %ld of the poses answered between steps "
+                "(status model / apart in the CSV), the others stepped, %ld extra steps at turning poses\n",
+                options.multirate.physics_every, options.multirate.max_model_distance_m, model_answers,
+                answerer->turn_steps());
   }
   if (model.obstacle_surface().range_axis >= 0) {
     std::printf("compliance range %.3g m: %d steps needed a node pair beyond it%s\n", model.obstacle_surface().range_m,
