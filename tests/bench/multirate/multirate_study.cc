@@ -43,6 +43,7 @@ struct Options {
   int repeats = 3;
   std::string csv;
   std::string between = "frozen";  // or "return-mapping"
+  std::string summary;             // appends one row per K (scripts/multirate-tradeoff)
 };
 
 // CPU time of this thread, s: the runs compare work, not the VM's scheduling.
@@ -157,6 +158,10 @@ bool Parse(int argc, char** argv, Options* options) {
   command.AddInteger("--repeats", &options->repeats, "N", "timed runs per K, interleaved (default 3)", "Run", 1,
                      1000);
   command.AddCsv(&options->csv, "one row per pose and K: k, pose, source, force, reference force");
+  command.AddText("--summary", &options->summary, "FILE",
+                  "append one row per K to FILE (header written when the file is new): path, spacing, distance, K, "
+                  "shares, errors, time ratio",
+                  hapco::cli::kGroupOutput);
   return command.Parse(argc, argv);
 }
 
@@ -198,6 +203,17 @@ int RunStudy(const Options& options) {
   std::FILE* csv = options.csv.empty() ? nullptr : std::fopen(options.csv.c_str(), "w");
   if (!options.csv.empty() && csv == nullptr) throw InputError("cannot write " + options.csv);
   if (csv != nullptr) std::fprintf(csv, "physics_every,pose,source,fx_n,fy_n,fz_n,ref_fx_n,ref_fy_n,ref_fz_n\n");
+  std::FILE* summary = nullptr;
+  if (!options.summary.empty()) {
+    const bool is_new = !std::ifstream(options.summary).good();
+    summary = std::fopen(options.summary.c_str(), "a");
+    if (summary == nullptr) throw InputError("cannot write " + options.summary);
+    if (is_new) {
+      std::fprintf(summary, "scene,path,spacing_m,between,max_model_distance_m,physics_every,steps_pct,model_pct,apart_pct,"
+                            "rms_error_pct_of_peak,max_error_pct_of_peak,max_jump_n,reference_max_jump_n,us_per_pose,"
+                            "time_ratio,peak_n,load1\n");
+    }
+  }
   for (std::size_t i = 0; i < every.size(); ++i) {
     const Run& run = runs[i];
     const double n = static_cast<double>(run.force_n.size());
@@ -220,7 +236,17 @@ int RunStudy(const Options& options) {
                 100.0 * counts[1] / n, 100.0 * counts[2] / n, 100.0 * std::sqrt(sum_sq / n) / peak_n,
                 100.0 * max_error / peak_n, MaxJump(run.force_n), 1e6 * per_pose_s,
                 Median(seconds[i]) / reference_s, run.not_converged);
+    if (summary != nullptr) {
+      std::fprintf(summary, "%s,%s,%.6g,%s,%.6g,%d,%.3f,%.3f,%.3f,%.5f,%.5f,%.6g,%.6g,%.3f,%.5f,%.6g,%s\n",
+                   scene.name.c_str(), options.trajectory.empty() ? options.path.c_str() : "file",
+                   options.path == "top-face" && options.trajectory.empty() ? options.spacing_m : 0.0,
+                   options.between.c_str(), options.max_model_distance_m, every[i], 100.0 * counts[0] / n,
+                   100.0 * counts[1] / n, 100.0 * counts[2] / n, 100.0 * std::sqrt(sum_sq / n) / peak_n,
+                   100.0 * max_error / peak_n, MaxJump(run.force_n), reference_jump_n, 1e6 * per_pose_s,
+                   Median(seconds[i]) / reference_s, peak_n, LoadAverage().substr(0, LoadAverage().find(' ')).c_str());
+    }
   }
+  if (summary != nullptr) std::fclose(summary);
   if (csv != nullptr) std::fclose(csv);
   std::printf("load average at end: %s\n", LoadAverage().c_str());
   return 0;
