@@ -1,23 +1,23 @@
 #pragma once
-// Multirate answering (issue 13): the contact physics on some poses, the step's local model on
-// the poses between, every pose answered at the device's 1 kHz.
+// Multirate answering (issue 13): a contact step on some poses, a cheaper answer from the last
+// step on the poses between, every pose answered at the device's 1 kHz.
 //
 // Why: a physics step of benchmark 1 costs 100-230 us (docs/performance.md) and a 2-core server
 // carries 4-8 sessions stepped on every pose, where the DDS path alone carries 16-24. Haptic
 // rendering of deformable bodies has long run the deformation slower than the device and bridged
-// the gap with a local linear model of the contact (Astley & Hayward 1998; Cavusoglu & Tendick,
+// the gap with a local model of the contact (Astley & Hayward 1998; Cavusoglu & Tendick,
 // "Multirate simulation for high fidelity haptic interaction with deformable objects", ICRA
-// 2000). Here the bridge is the LocalContactModel every step already builds for the clients
-// (local_model.h): F(d) = F(d_k) + K (d - d_k) for the step's active set.
+// 2000). Here the bridge is the last step's own contact problem (below).
 //
 // Between steps, a pose in contact is answered in one of two ways (BetweenSteps):
 //  - kFrozenContacts (default): the last step's contact problem, contacts and W unchanged,
-//    with the free relative displacement moved to this pose, ũ(d) = ũ_k + G (d - d_k)
-//    (exact for those contacts: the tool's free displacement is linear in d, algorithms.md
-//    §6), solved again warm from the step's forces. Each contact keeps its own Coulomb law, so
-//    stick/slip changes, reversals and contacts opening come out as a step would give them;
-//    what it does not see is geometry: a contact closing elsewhere, a contact point moving on
-//    its face. Costs one solve (no detection, no assembly): a quarter of a step on benchmark 1.
+//    with the free relative displacement moved to this pose, ũ(d) = ũ_k - (u_t)_k + G (d - d_k)
+//    (the slip counted from the step's end; exact for those contacts: the tool's free
+//    displacement is linear in d, algorithms.md §6), solved again warm from the step's forces.
+//    Each contact keeps its own Coulomb law, so stick/slip changes, reversals and contacts
+//    opening come out as a step would give them; what it does not see is geometry: a contact
+//    closing elsewhere, a contact point moving on its face. Costs one solve (no detection, no
+//    assembly): about a tenth of a step on benchmark 1 (20-25 us against 210-230 us here).
 //  - kReturnMapping: the force of a linear model, F_k + K (d - d_k) with every touching
 //    contact stuck (LocalModelBuilder::Sliding::kAsSticking), its part across the resultant's
 //    normal cut back to the friction cone (a return mapping on the resultant, Simo & Hughes

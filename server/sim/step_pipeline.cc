@@ -482,11 +482,13 @@ const StepOutput& TwoBodySession::Step(const Eigen::Vector3d& device_translation
   //    obstacle still carries the last forces' deformation, so a tool that lifts by more than
   //    the activation gap in one step (a fast hand, a burst of lost poses) would find every pair
   //    beyond it, drop every contact, and sit inside the sprung-back bar with no contact left
-  //    to persist and new ones that deep refused: the gap activates pairs within twice the
-  //    step's travel too, and the solve (W holds the springback) decides which still push.
+  //    to persist and new ones that deep refused: after a step with contacts, the gap activates
+  //    pairs within twice the step's travel too, and the solve (W holds the springback) decides
+  //    which still push. (Without contacts nothing is loaded and nothing springs back.)
   Stopwatch watch;
   const double travel_m = (device_translation_m - device_translation_m_).norm();
-  const double activation_gap_m = std::max(model_.scene().activation_gap_m, 2.0 * travel_m);
+  const double activation_gap_m =
+      previous_ids_.empty() ? model_.scene().activation_gap_m : std::max(model_.scene().activation_gap_m, 2.0 * travel_m);
   tool_pass_parameters_.activation_gap_m = activation_gap_m;
   edge_pass_parameters_.activation_gap_m = activation_gap_m;
   BroadPhase(device_translation_m - device_translation_m_);
