@@ -123,7 +123,9 @@ bool MultirateAnswerer::FrozenContactsAnswer(const Eigen::Vector3d& d, Eigen::Ve
   const Eigen::Vector3d offset_m = d - session_->last_output().device_translation_m;
   frozen_.free_displacement_m.noalias() = free_per_device_ * offset_m;
   frozen_.free_displacement_m += step_free_m_;
-  result_.force_n = step_force_n_;  // warm start from the step's forces (parameters.warm_start)
+  // Warm start (parameters.warm_start) from the last answer's forces, one pose away, or from the
+  // step's after a step.
+  if (model_answers_in_a_row_ == 0 || result_.force_n.size() != step_force_n_.size()) result_.force_n = step_force_n_;
   const contact::SolverStatus status =
       contact::Solve(session_->solver, frozen_, session_->parameters, &workspace_, &result_);
   if (status != contact::SolverStatus::kConverged) return false;

@@ -17,7 +17,7 @@
 //    Each contact keeps its own Coulomb law, so stick/slip changes, reversals and contacts
 //    opening come out as a step would give them; what it does not see is geometry: a contact
 //    closing elsewhere, a contact point moving on its face. Costs one solve (no detection, no
-//    assembly): about a tenth of a step on benchmark 1 (20-25 us against 210-230 us here).
+//    assembly), warm from the previous answer: 15-25 us on benchmark 1 against 210-230 us a step.
 //  - kReturnMapping: the force of a linear model, F_k + K (d - d_k) with every touching
 //    contact stuck (LocalModelBuilder::Sliding::kAsSticking), its part across the resultant's
 //    normal cut back to the friction cone (a return mapping on the resultant, Simo & Hughes
