@@ -46,6 +46,7 @@
 
 #include <Eigen/Dense>
 
+#include "common/load_average.h"
 #include "cli/command_line.h"
 #include "cli/run_main.h"
 #include "common/timer.h"
@@ -95,13 +96,6 @@ constexpr double kTolerances[] = {1e-4, 1e-6, 1e-8};
 double Median(std::vector<double> v) {
   std::sort(v.begin(), v.end());
   return v[v.size() / 2];
-}
-
-std::string LoadAverage() {
-  std::ifstream f("/proc/loadavg");
-  std::string a, b, c;
-  f >> a >> b >> c;
-  return a + " " + b + " " + c;
 }
 
 // The slab, its candidate nodes (sorted by distance to the top-face centre) and W for m_max.
@@ -385,7 +379,7 @@ int Run(const Config& cfg) {
   const std::vector<int> sizes =
       cfg.quick ? std::vector<int>{10, 50, 100} : std::vector<int>{10, 50, 100, 300, 1000};
   const int m_max = sizes.back();
-  const std::string load_start = LoadAverage();
+  const std::string load_start = hapco::LoadAverageText();
   const hapco::Stopwatch wall;
   const Scene scene = BuildScene(m_max);
   std::printf("contact_bench: slab 0.10x0.05x0.02 m Tet4 50x24x4 (%d nodes), E=3e6 Pa nu=0.3,\n"
@@ -588,7 +582,7 @@ int Run(const Config& cfg) {
     }
     std::printf("\n");
   }
-  const std::string load_end = LoadAverage();
+  const std::string load_end = hapco::LoadAverageText();
   std::printf("total %.1f s; load average at end: %s\n", wall.ElapsedSeconds(), load_end.c_str());
 
   if (!cfg.csv.empty()) {

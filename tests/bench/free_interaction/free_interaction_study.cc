@@ -19,6 +19,7 @@
 
 #include <Eigen/Dense>
 
+#include "common/load_average.h"
 #include "cli/command_line.h"
 #include "cli/run_main.h"
 #include "common/error.h"
@@ -46,13 +47,6 @@ struct PathSummary {
   double worst_step_s = 0;
   std::vector<Eigen::Vector3d> poses_m, forces_n;  // per step
 };
-
-std::string LoadAverage() {
-  std::ifstream file("/proc/loadavg");
-  std::string a, b, c;
-  file >> a >> b >> c;
-  return a + " " + b + " " + c;
-}
 
 // Tool home: x ∈ [0.04, 0.06], y ∈ [0, 0.02], z ∈ [0.02, 0.03] m on a 0.1 x 0.02 x 0.02 m bar.
 std::vector<PathSpec> Paths() {
@@ -192,7 +186,7 @@ int Run(const Options& options) {
   const Eigen::Vector3i reference_obstacle = Divisions(options.reference_obstacle, "--reference-obstacle");
   const Eigen::Vector3i reference_tool = Divisions(options.reference_tool, "--reference-tool");
   std::filesystem::create_directories(out_dir);
-  std::printf("load average at start: %s\n", LoadAverage().c_str());
+  std::printf("load average at start: %s\n", hapco::LoadAverageText().c_str());
   std::FILE* summary_csv = std::fopen((out_dir + "/summary.csv").c_str(), "w");
   if (summary_csv == nullptr) throw InputError("cannot write " + out_dir + "/summary.csv");
   std::fprintf(summary_csv, "scene,tool,path,steps,not_converged,peak_n,max_relative_change,at_x_m,"
@@ -304,7 +298,7 @@ int Run(const Options& options) {
       }
     }
   }
-  std::printf("load average at end: %s\n", LoadAverage().c_str());
+  std::printf("load average at end: %s\n", hapco::LoadAverageText().c_str());
   return 0;
 }
 

@@ -18,6 +18,8 @@
 #include <string>
 #include <vector>
 
+#include "common/load_average.h"
+#include "common/statistics.h"
 #include "cli/command_line.h"
 #include "cli/run_main.h"
 #include "common/error.h"
@@ -120,13 +122,6 @@ double MaxJump(const std::vector<Eigen::Vector3d>& force_n) {
   return jump;
 }
 
-std::string LoadAverage() {
-  std::ifstream file("/proc/loadavg");
-  std::string a, b, c;
-  file >> a >> b >> c;
-  return a + " " + b + " " + c;
-}
-
 constexpr const char* kDescription =
     R"(Multirate answering (sim/multirate.h): the physics on every K-th pose at most, the last step's local contact model on the poses between. For each K of --physics-every, the same path is answered and compared with K = 1 (a step on every pose) in the same run: share of poses stepped, force error (RMS and max of |F_K - F_1| relative to the peak |F_1|), the largest pose-to-pose force change against K = 1's own, and CPU time per pose against K = 1 (median of --repeats). Prints numbers only; the load average is printed at start and end.)";
 
@@ -165,14 +160,11 @@ bool Parse(int argc, char** argv, Options* options) {
   return command.Parse(argc, argv);
 }
 
-double Median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v.empty() ? 0.0 : v[v.size() / 2];
-}
+double Median(const std::vector<double>& v) { return QuantileOf(v, 0.5); }
 
 int RunStudy(const Options& options) {
   const std::vector<int> every = ParseList(options.physics_every);
-  std::printf("load average at start: %s\n", LoadAverage().c_str());
+  std::printf("load average at start: %s\n", hapco::LoadAverageText().c_str());
   const sim::SceneSpec scene = io::LoadSceneFile(options.scene);
   const sim::TwoBodyModel model(scene);
   const std::vector<Eigen::Vector3d> path = DevicePath(scene, options);
@@ -243,12 +235,12 @@ int RunStudy(const Options& options) {
                    options.between.c_str(), options.max_model_distance_m, every[i], 100.0 * counts[0] / n,
                    100.0 * counts[1] / n, 100.0 * counts[2] / n, 100.0 * std::sqrt(sum_sq / n) / peak_n,
                    100.0 * max_error / peak_n, MaxJump(run.force_n), reference_jump_n, 1e6 * per_pose_s,
-                   Median(seconds[i]) / reference_s, peak_n, LoadAverage().substr(0, LoadAverage().find(' ')).c_str());
+                   Median(seconds[i]) / reference_s, peak_n, hapco::LoadAverageText().substr(0, hapco::LoadAverageText().find(' ')).c_str());
     }
   }
   if (summary != nullptr) std::fclose(summary);
   if (csv != nullptr) std::fclose(csv);
-  std::printf("load average at end: %s\n", LoadAverage().c_str());
+  std::printf("load average at end: %s\n", hapco::LoadAverageText().c_str());
   return 0;
 }
 

@@ -26,6 +26,7 @@
 
 #include <Eigen/Dense>
 
+#include "common/load_average.h"
 #include "cli/command_line.h"
 #include "cli/run_main.h"
 #include "common/error.h"
@@ -103,13 +104,6 @@ double Percentile(std::vector<double> v, double q) {
   std::sort(v.begin(), v.end());
   const std::size_t i = std::min(v.size() - 1, static_cast<std::size_t>(std::ceil(q * static_cast<double>(v.size())) - 1));
   return v[q <= 0 ? 0 : i];
-}
-
-std::string LoadAverage() {
-  std::ifstream file("/proc/loadavg");
-  std::string a, b, c;
-  file >> a >> b >> c;
-  return a + " " + b + " " + c;
 }
 
 struct Series {
@@ -196,7 +190,7 @@ bool Parse(int argc, char** argv, Options* options) {
 }
 
 int Run(const Options& options) {
-  std::printf("load average at start: %s (2 cores, shared)\n", LoadAverage().c_str());
+  std::printf("load average at start: %s (2 cores, shared)\n", hapco::LoadAverageText().c_str());
   const sim::SceneSpec scene = io::LoadSceneFile(options.scene);
   const std::size_t rss_before = PeakResidentBytes();
   Stopwatch setup;
@@ -389,7 +383,7 @@ int Run(const Options& options) {
     std::printf("  ratio of medians full / precomputed: %.0f x; max |F_full - F_precomputed| = %.2e N (peak %.3f N)\n",
                 Percentile(full_series.step, 0.5) / Percentile(fast_series.step, 0.5), worst_force_difference, peak_force);
   }
-  std::printf("\nload average at end: %s\n", LoadAverage().c_str());
+  std::printf("\nload average at end: %s\n", hapco::LoadAverageText().c_str());
   return 0;
 }
 
