@@ -61,14 +61,14 @@ void LocalModelBuilder::LinearizeContacts(const TwoBodySession& session) {
   const contact::ContactProblem& problem = session.last_problem();
   const contact::SolverResult& result = session.last_result();
   const int m = static_cast<int>(contacts.size());
+  unknowns_.clear();
+  rows_.clear();
   if (m == 0 || result.force_n.size() < 3 * m) return;
   const double gain = session.model().scene().force_gain;
 
   // Active set: the equations E and the basis B of the unknowns (local frame per contact).
   // The normal of the resultant: r_α,n n_α on the tool, n_α = the frame's normal signed
   // towards the tool (SampleContact), summed and normalised.
-  unknowns_.clear();
-  rows_.clear();
   Eigen::Vector3d normal_force_n = Eigen::Vector3d::Zero();
   for (int alpha = 0; alpha < m; ++alpha) {
     const ContactSample sample = session.SampleContact(alpha);
@@ -128,6 +128,18 @@ void LocalModelBuilder::LinearizeContacts(const TwoBodySession& session) {
     for (int k = 0; k < c.num_tool; ++k) weight += c.tool_coefficients[static_cast<std::size_t>(k)];
     const Eigen::RowVector3d dz_j = dz_.row(j);  // fixed size: no temporary on the heap
     model.stiffness_n_per_m.noalias() += (gain * weight) * (c.frame.transpose() * u.direction) * dz_j;
+  }
+}
+
+void LocalModelBuilder::ContactForcePerDeviceTranslation(int num_contacts, Eigen::MatrixXd* dr_dd) const {
+  dr_dd->setZero(3 * num_contacts, 3);
+  // dz_ is stale when the last Linearize had no unknowns (it returns before solving).
+  if (unknowns_.empty() || dz_.rows() != static_cast<Eigen::Index>(unknowns_.size())) return;
+  for (std::size_t j = 0; j < unknowns_.size(); ++j) {
+    const Unknown& u = unknowns_[j];
+    if (u.contact >= num_contacts) continue;
+    const Eigen::RowVector3d dz_j = dz_.row(static_cast<Eigen::Index>(j));
+    dr_dd->middleRows<3>(3 * u.contact).noalias() += u.direction * dz_j;
   }
 }
 

@@ -88,6 +88,11 @@ class LocalModelBuilder {
 
   const LocalContactModel& Linearize(const TwoBodySession& session);
   const LocalContactModel& model() const { return model_; }
+  // dr/dd of the last Linearize (3m x 3, N/m): how each contact's force (its local frame n, t1,
+  // t2) moves with the device translation for that step's active set, r_α = Σ_j∈α direction_j
+  // dz_j/dd (zero rows for separating contacts). m is that step's contact count. Multirate
+  // answers predict their solve's start with it (multirate.h).
+  void ContactForcePerDeviceTranslation(int num_contacts, Eigen::MatrixXd* dr_dd) const;
 
  private:
   void LinearizeContacts(const TwoBodySession& session);

@@ -17,7 +17,8 @@
 //    Each contact keeps its own Coulomb law, so stick/slip changes, reversals and contacts
 //    opening come out as a step would give them; what it does not see is geometry: a contact
 //    closing elsewhere, a contact point moving on its face. Costs one solve (no detection, no
-//    assembly), warm from the previous answer: 15-25 us on benchmark 1 against 210-230 us a step.
+//    assembly), started from the previous answer moved along the step's dr/dd: 14-17 us on
+//    benchmark 1 against 220-280 us a step (multirate_study's us/model and us/step).
 //  - kReturnMapping: the force of a linear model, F_k + K (d - d_k) with every touching
 //    contact stuck (LocalModelBuilder::Sliding::kAsSticking), its part across the resultant's
 //    normal cut back to the friction cone (a return mapping on the resultant, Simo & Hughes
@@ -111,6 +112,11 @@ class MultirateAnswerer {
   contact::ContactProblem frozen_;
   Eigen::VectorXd step_free_m_, step_force_n_;
   Eigen::MatrixXd free_per_device_;
+  // dr/dd of the step's active set (LocalModelBuilder::ContactForcePerDeviceTranslation, 3m x 3,
+  // N/m), and the pose whose answer result_.force_n holds, m: each solve starts from that
+  // answer moved along dr/dd to the new pose.
+  Eigen::MatrixXd force_per_device_;
+  Eigen::Vector3d answered_pose_m_ = Eigen::Vector3d::Zero();
   std::vector<Eigen::Matrix3d> device_share_;
   contact::SolverWorkspace workspace_;
   contact::SolverResult result_;

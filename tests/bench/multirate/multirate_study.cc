@@ -10,6 +10,7 @@
 // Prints numbers, never asserts on time; the accuracy has its test in
 // tests/unit/sim/multirate_test.cc.
 #include <algorithm>
+#include <chrono>
 #include <ctime>
 #include <cmath>
 #include <cstdio>
@@ -87,6 +88,10 @@ struct Run {
   std::vector<Eigen::Vector3d> force_n;           // per pose (poses 1..n), N
   std::vector<sim::AnswerSource> source;
   double seconds = 0;                              // thread CPU over the whole path
+  // Wall time of the Answer calls by what they did, s: a step (a turn step and the answer after
+  // it count as a step), a model answer; and how many of each.
+  double step_seconds = 0, model_seconds = 0;
+  int step_calls = 0, model_calls = 0;
   int not_converged = 0;                           // physics steps not converged
 };
 
@@ -104,7 +109,17 @@ Run AnswerPath(const sim::TwoBodyModel& model, const std::vector<Eigen::Vector3d
   run.force_n.reserve(path.size());
   const double start_s = ThreadCpuSeconds();
   for (std::size_t k = 1; k < path.size(); ++k) {
+    const long turn_steps_before = answerer.turn_steps();
+    const auto call_start = std::chrono::steady_clock::now();
     const sim::MultirateAnswer answer = answerer.Answer(path[k]);
+    const double call_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - call_start).count();
+    if (answer.source == sim::AnswerSource::kStep || answerer.turn_steps() != turn_steps_before) {
+      run.step_seconds += call_s;
+      ++run.step_calls;
+    } else if (answer.source == sim::AnswerSource::kModel) {
+      run.model_seconds += call_s;
+      ++run.model_calls;
+    }
     run.force_n.push_back(answer.device_force_n);
     run.source.push_back(answer.source);
     if (answer.source == sim::AnswerSource::kStep &&
@@ -190,8 +205,8 @@ int RunStudy(const Options& options) {
   const double reference_s = Median(seconds[reference_index]);
   std::printf("reference (a step on every pose): peak |F| %.4g N, largest pose-to-pose change %.4g N, %.2f us per pose\n",
               peak_n, reference_jump_n, 1e6 * reference_s / static_cast<double>(reference.force_n.size()));
-  std::printf("%4s %8s %8s %8s %12s %12s %12s %10s %10s %8s\n", "K", "steps%", "model%", "apart%", "rms err %pk",
-              "max err %pk", "max jump N", "us/pose", "time/K=1", "unconv");
+  std::printf("%4s %8s %8s %8s %12s %12s %12s %10s %10s %8s %9s %9s\n", "K", "steps%", "model%", "apart%",
+              "rms err %pk", "max err %pk", "max jump N", "us/pose", "time/K=1", "unconv", "us/step", "us/model");
   std::FILE* csv = options.csv.empty() ? nullptr : std::fopen(options.csv.c_str(), "w");
   if (!options.csv.empty() && csv == nullptr) throw InputError("cannot write " + options.csv);
   if (csv != nullptr) std::fprintf(csv, "physics_every,pose,source,fx_n,fy_n,fz_n,ref_fx_n,ref_fy_n,ref_fz_n\n");
@@ -224,10 +239,13 @@ int RunStudy(const Options& options) {
       }
     }
     const double per_pose_s = Median(seconds[i]) / n;
-    std::printf("%4d %8.1f %8.1f %8.1f %12.3f %12.3f %12.4g %10.2f %10.3f %8d\n", every[i], 100.0 * counts[0] / n,
-                100.0 * counts[1] / n, 100.0 * counts[2] / n, 100.0 * std::sqrt(sum_sq / n) / peak_n,
-                100.0 * max_error / peak_n, MaxJump(run.force_n), 1e6 * per_pose_s,
-                Median(seconds[i]) / reference_s, run.not_converged);
+    // Wall time per call of the first run (us; a turn step and its answer count as one step call).
+    const auto per_call_us = [](double s, int calls) { return calls > 0 ? 1e6 * s / calls : 0.0; };
+    std::printf("%4d %8.1f %8.1f %8.1f %12.3f %12.3f %12.4g %10.2f %10.3f %8d %9.1f %9.1f\n", every[i],
+                100.0 * counts[0] / n, 100.0 * counts[1] / n, 100.0 * counts[2] / n,
+                100.0 * std::sqrt(sum_sq / n) / peak_n, 100.0 * max_error / peak_n, MaxJump(run.force_n),
+                1e6 * per_pose_s, Median(seconds[i]) / reference_s, run.not_converged,
+                per_call_us(run.step_seconds, run.step_calls), per_call_us(run.model_seconds, run.model_calls));
     if (summary != nullptr) {
       std::fprintf(summary, "%s,%s,%.6g,%s,%.6g,%d,%.3f,%.3f,%.3f,%.5f,%.5f,%.6g,%.6g,%.3f,%.5f,%.6g,%s\n",
                    scene.name.c_str(), options.trajectory.empty() ? options.path.c_str() : "file",

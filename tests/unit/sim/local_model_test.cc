@@ -13,6 +13,7 @@
 #include <cstdio>
 #include <vector>
 
+#include "contact/solver.h"
 #include "sim/step_pipeline.h"
 #include "coarse_test_scene.h"
 
@@ -141,6 +142,58 @@ TEST(LocalContactModel, ThePressModelPredictsAFurtherPressFarBetterThanHoldingTh
   const double model_error = (full - at.model.ForceAt(path.back() + further)).norm();
   EXPECT_GT(held_error, 0.01) << "5 um must change the force measurably";
   EXPECT_LT(model_error, 0.05 * held_error) << "model " << model_error << " N, held " << held_error << " N";
+}
+
+TEST(LocalContactModel, ContactForcesPerDeviceTranslationMatchTheStepsProblemSolvedAtAMovedPose) {
+  // dr/dd (what multirate answers start their solve from). Frictionless, every contact stays on
+  // the cone's axis and the solution is linear in d: against the step's own contact problem
+  // solved again with its free displacement moved by +-G h e_j. With mu = 10 (sticking, but one
+  // contact at the edge sits on its cone's rim, so the solution has a kink there and the tight
+  // reference solves do not always converge) dr/dd summed onto the device must be the model's
+  // stiffness, which StickingPressMatchesFiniteDifferencesInEveryDirection checks.
+  for (const double friction : {0.0, 10.0}) {
+    const TwoBodyModel model(CoarseScene(friction));
+    TwoBodySession session(model);
+    for (const Eigen::Vector3d& d : PressAndSlide(0)) session.Step(d);
+    LocalModelBuilder builder;
+    const LocalContactModel& local = builder.Linearize(session);
+    const int m = session.last_output().num_contacts;
+    ASSERT_GT(m, 0);
+    Eigen::MatrixXd dr_dd, g;
+    builder.ContactForcePerDeviceTranslation(m, &dr_dd);
+    ASSERT_EQ(dr_dd.rows(), 3 * m);
+    ASSERT_EQ(dr_dd.cols(), 3);
+    ASSERT_GT(dr_dd.norm(), 0.0);
+    if (friction == 0.0) {
+      FreeDisplacementPerDeviceTranslation(session, &g);
+      const double h_m = 1e-6;  // the 1e-13 m solves resolve it to ~1e-5 of |dr/dd| h
+      double worst = 0;
+      for (int j = 0; j < 3; ++j) {
+        for (const double sign : {1.0, -1.0}) {
+          contact::ContactProblem moved = session.last_problem();
+          moved.free_displacement_m += sign * h_m * g.col(j);
+          contact::SolverResult result;
+          result.force_n = session.last_result().force_n;
+          contact::SolverWorkspace workspace;
+          ASSERT_EQ(contact::Solve(session.solver, moved, session.parameters, &workspace, &result),
+                    contact::SolverStatus::kConverged);
+          const Eigen::VectorXd finite_difference = (result.force_n - session.last_result().force_n) / (sign * h_m);
+          const double error = (finite_difference - dr_dd.col(j)).norm() / dr_dd.norm();
+          EXPECT_LT(error, 1e-4) << "direction " << j << " sign " << sign;
+          worst = std::max(worst, error);
+        }
+      }
+      std::printf("frictionless, %d contacts: largest |dr/dd - finite difference| / |dr/dd| %.2e\n", m, worst);
+    }
+    Eigen::Matrix3d stiffness = Eigen::Matrix3d::Zero();
+    for (int alpha = 0; alpha < m; ++alpha) {
+      const StepContact& c = session.contacts()[static_cast<std::size_t>(alpha)];
+      double weight = 0.0;
+      for (int k = 0; k < c.num_tool; ++k) weight += c.tool_coefficients[static_cast<std::size_t>(k)];
+      stiffness += model.scene().force_gain * weight * c.frame.transpose() * dr_dd.middleRows<3>(3 * alpha);
+    }
+    EXPECT_LT((stiffness - local.stiffness_n_per_m).norm(), 1e-9 * local.stiffness_n_per_m.norm()) << "mu " << friction;
+  }
 }
 
 TEST(LocalContactModel, NoContactGivesNoStiffness) {
