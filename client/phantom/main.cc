@@ -71,8 +71,8 @@ bool Parse(int argc, char** argv, Options* o) {
   command.AddConnectTimeout(&o->connect_timeout_s, "wait at most S s for the server (default 30)");
   command.AddCsv(&o->csv_path,
                  "one row per tick (tick, time, pose sequence, position, force sequence, raw force, rendered "
-                 "force, round trip, render latency, stale flag; force sequence -1 = no new force), plus a row "
-                 "per extra force received within the same tick");
+                 "force, round trip, render latency, stale flag, where the force's local model is anchored; "
+                 "force sequence -1 = no new force), plus a row per extra force received within the same tick");
   command.AddRtPriority(&o->rt_priority, "the servo tick");
   command.Deprecate("--timeout-ms", "--force-timeout-ms");
   command.Deprecate("--duration", "--duration-s");
@@ -94,20 +94,25 @@ extern "C" void OnStopSignal(int) { g_stop.store(true); }
 
 void WriteCsvRows(std::FILE* csv, const hapco::phantom::TickRecord& t) {
   // One row per force taken this tick (the last one is rendered), or one row without a force.
+  // model_*_m: where the force's local model is anchored (the pose it answered; NaN without a
+  // contact model or surface ahead).
+  const Eigen::Vector3d none = Eigen::Vector3d::Constant(std::nan(""));
   const auto row = [&](long long force_sequence, const Eigen::Vector3d& raw, double round_trip_us,
-                       double render_latency_us) {
-    std::fprintf(csv, "%d,%.6f,%lld,%.12g,%.12g,%.12g,%lld,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%.1f,%.1f,%d\n", t.tick,
-                 t.time_s, t.published ? static_cast<long long>(t.pose_sequence) : -1LL, t.position_m.x(), t.position_m.y(),
-                 t.position_m.z(), force_sequence, raw.x(), raw.y(), raw.z(), t.rendered_force_n.x(),
-                 t.rendered_force_n.y(), t.rendered_force_n.z(), round_trip_us, render_latency_us, t.stale ? 1 : 0);
+                       double render_latency_us, const Eigen::Vector3d& model_at) {
+    std::fprintf(csv, "%d,%.6f,%lld,%.12g,%.12g,%.12g,%lld,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%.1f,%.1f,%d,%.17g,%.17g,%.17g\n",
+                 t.tick, t.time_s, t.published ? static_cast<long long>(t.pose_sequence) : -1LL, t.position_m.x(),
+                 t.position_m.y(), t.position_m.z(), force_sequence, raw.x(), raw.y(), raw.z(), t.rendered_force_n.x(),
+                 t.rendered_force_n.y(), t.rendered_force_n.z(), round_trip_us, render_latency_us, t.stale ? 1 : 0,
+                 model_at.x(), model_at.y(), model_at.z());
   };
   if (t.forces.empty()) {
-    row(-1, Eigen::Vector3d::Constant(std::nan("")), -1.0, -1.0);
+    row(-1, none, -1.0, -1.0, none);
     return;
   }
   for (const auto& f : t.forces) {
     row(static_cast<long long>(f.pose_sequence), f.force_n, f.round_trip_us(),
-        static_cast<double>(t.tick_ns - f.client_time_ns) * 1e-3);
+        static_cast<double>(t.tick_ns - f.client_time_ns) * 1e-3,
+        f.model.valid || f.model.surface_ahead ? f.model.position_m : none);
   }
 }
 
@@ -135,7 +140,7 @@ int Run(const Options& o) {
     csv = std::fopen(o.csv_path.c_str(), "w");
     if (csv == nullptr) throw InputError("cannot write " + o.csv_path);
     std::fprintf(csv, "tick,time_s,sequence,x_m,y_m,z_m,force_sequence,raw_fx_n,raw_fy_n,raw_fz_n,"
-                      "fx_n,fy_n,fz_n,round_trip_us,render_latency_us,stale\n");
+                      "fx_n,fy_n,fz_n,round_trip_us,render_latency_us,stale,model_x_m,model_y_m,model_z_m\n");
   }
   std::signal(SIGINT, OnStopSignal);
   std::signal(SIGTERM, OnStopSignal);

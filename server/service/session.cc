@@ -128,8 +128,9 @@ int64_t Session::StepAndPublish(const hapco_idl_DevicePose& pose, int64_t receiv
     // (The multirate answerer has linearized this step already.)
     FillLocalModel(force_finite, /*linearized=*/multirate);
   } else {
-    force_.iterations = 0;  // the status, contact counts and model stay the last step's
+    force_.iterations = 0;  // the status and contact counts stay the last step's
     if (turned) FillLocalModel(out.device_force_n.allFinite(), /*linearized=*/true);  // the turn's step
+    AnchorModelAtAnswer(p);
   }
   force_.server_send_ns = MonotonicNowNs();
   if (force_writer_->Write(force_) != DDS_RETCODE_OK) ++counters_.force_write_errors;
@@ -228,6 +229,19 @@ void Session::FillLocalModel(bool force_is_from_this_step, bool linearized) {
   }
   m.normal = ToIdl(local.normal_device);
   m.friction_coefficient = local.friction_coefficient;
+}
+
+void Session::AnchorModelAtAnswer(const Eigen::Vector3d& pose_m) {
+  hapco_idl_LocalContactModel& m = force_.model;
+  if (!m.valid && !m.surface_ahead) return;  // nothing a client evaluates at x0
+  const Eigen::Vector3d anchor(m.position_m.x, m.position_m.y, m.position_m.z);
+  if (m.surface_ahead) {
+    // The plane ahead moves with its anchor: gap(x) = gap0 + n·(x - x0) (local_model.h). An
+    // apart answer comes only while that gap stays open (multirate.h).
+    const Eigen::Vector3d normal(m.surface_normal.x, m.surface_normal.y, m.surface_normal.z);
+    m.surface_gap_m = std::max(0.0, m.surface_gap_m + normal.dot(pose_m - anchor));
+  }
+  m.position_m = ToIdl(pose_m);
 }
 
 void Session::FillContactFrame(uint64_t pose_sequence) {

@@ -121,6 +121,11 @@ class Session {
   // FeedbackForce.model from the step just made (invalid without contact force); linearized:
   // the builder holds this step's model already.
   void FillLocalModel(bool force_is_from_this_step, bool linearized);
+  // A multirate answer between steps (sim/multirate.h): the last step's model, anchored at the
+  // pose this force answers. A client renders F0 + (its stiffness) x (x - x0) with F0 the force
+  // it received, so x0 must be that force's pose, not the step's: up to --model-distance-m
+  // apart, which along the normal is a whole wall offset (force_renderer.h).
+  void AnchorModelAtAnswer(const Eigen::Vector3d& pose_m);
 
   std::string client_id_;
   SessionPhysics physics_;

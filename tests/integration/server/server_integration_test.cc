@@ -402,10 +402,13 @@ TEST(ServerProcess, MultirateAnswersAreTheOfflineMultirateReplay) {
   sim::MultirateParameters parameters;
   parameters.physics_every = 4;
   sim::MultirateAnswerer answerer(session, builder, parameters);
-  std::map<uint64_t, Eigen::Vector3d> expected;
+  std::map<uint64_t, Eigen::Vector3d> expected, traced_pose;
+  std::map<uint64_t, sim::AnswerSource> source;
   unsigned long long replay_steps = 0, replay_model = 0;
   for (const auto& row : ReadCsv(dir + "/trace.csv")) {
     const sim::MultirateAnswer answer = answerer.Answer(Vec(row, "x_m", "y_m", "z_m"));
+    traced_pose[std::stoull(row.at("sequence"))] = Vec(row, "x_m", "y_m", "z_m");
+    source[std::stoull(row.at("sequence"))] = answer.source;
     (answer.source == sim::AnswerSource::kStep ? replay_steps : replay_model) += 1;
     expected[std::stoull(row.at("sequence"))] = answer.device_force_n;
     EXPECT_TRUE(SameForce(Vec(row, "fx_n", "fy_n", "fz_n"), answer.device_force_n)) << row.at("sequence");
@@ -414,15 +417,24 @@ TEST(ServerProcess, MultirateAnswersAreTheOfflineMultirateReplay) {
   EXPECT_GT(replay_model, replay_steps) << "most poses are answered between steps";
   EXPECT_NE(server_out.find(std::to_string(replay_steps) + " steps ("), std::string::npos) << server_out;
   EXPECT_NE(server_out.find("(--physics-every 4) " + std::to_string(replay_model)), std::string::npos) << server_out;
-  int received = 0;
+  int received = 0, anchored_model_answers = 0;
   for (const auto& row : ReadCsv(dir + "/phantom.csv")) {
     const long long s = std::stoll(row.at("force_sequence"));
     if (s < 0) continue;
     ASSERT_TRUE(expected.count(static_cast<uint64_t>(s))) << s;
     EXPECT_TRUE(SameForce(Vec(row, "raw_fx_n", "raw_fy_n", "raw_fz_n"), expected[static_cast<uint64_t>(s)])) << s;
     ++received;
+    // The local model a force carries is anchored where that force was computed: a client
+    // renders the received force at the model's x0 (client/phantom/force_renderer.h).
+    const Eigen::Vector3d model_at = Vec(row, "model_x_m", "model_y_m", "model_z_m");
+    if (!model_at.allFinite()) continue;
+    EXPECT_LT((model_at - traced_pose[static_cast<uint64_t>(s)]).norm(), 1e-12)
+        << "force " << s << " (" << sim::AnswerSourceName(source[static_cast<uint64_t>(s)]) << ") carries a model at "
+        << model_at.transpose() << ", its pose was " << traced_pose[static_cast<uint64_t>(s)].transpose();
+    if (source[static_cast<uint64_t>(s)] == sim::AnswerSource::kModel) ++anchored_model_answers;
   }
   EXPECT_GE(received, 270);
+  EXPECT_GT(anchored_model_answers, 100) << "model answers in contact carry the step's model";
   // The recorder: every step, none missing; the model answers counted, not taken for steps.
   EXPECT_NE(recorder_out.find("hapco-recorder: " + std::to_string(replay_steps) + " steps from 1 clients, 0 missing steps"),
             std::string::npos)
