@@ -142,6 +142,16 @@ Eigen::Vector3d ForceRenderer::LocalFriction(const Eigen::Vector3d& normal_force
   }
   Eigen::Vector3d spring = -k * (across * (position_m - anchor_m_));
   const double limit = FrictionLimit(*contact) * normal_n;
+  // What the same law gave at the last tick's position from the anchor as it was, before this
+  // tick's slip (for motion_change_n): while sticking, the spring's -k dx is the device's own
+  // motion; while slipping, the force stays at the cone's edge and the motion changes nothing.
+  // (Through the slipped anchor it read -k dx on every slipping tick, which the safety filter
+  // let through on top of its rate limit: a drag that grew without bound during a slide.)
+  if (last_position_m_.allFinite()) {
+    Eigen::Vector3d before = -k * (across * (last_position_m_ - anchor_m_));
+    if (before.norm() > limit) before *= limit / before.norm();
+    *at_last_position_n = before;
+  }
   const double magnitude = spring.norm();
   if (magnitude > limit) {
     // Slip: the anchor follows the device so the spring holds the cone's edge (Coulomb).
@@ -149,7 +159,6 @@ Eigen::Vector3d ForceRenderer::LocalFriction(const Eigen::Vector3d& normal_force
     anchor_m_ = position_m + spring / k;
     ++stats_.cone_limited;
   }
-  if (last_position_m_.allFinite()) *at_last_position_n = -k * (across * (last_position_m_ - anchor_m_));
   return spring;
 }
 

@@ -163,8 +163,8 @@ class ForceRenderer {
   // The friction limit μ of a contact model: the scene's, or the server's own ratio at x0.
   static double FrictionLimit(const ActiveModel& active);
   // The local friction's force at position_m for the normal force of this tick's command
-  // (slips the anchor when beyond the cone), and through the same anchor at the last tick's
-  // position (*at_last_position_n, for motion_change_n).
+  // (slips the anchor when beyond the cone), and at the last tick's position from the anchor
+  // before this tick's slip, within the cone (*at_last_position_n, for motion_change_n).
   Eigen::Vector3d LocalFriction(const Eigen::Vector3d& normal_force_n, const Eigen::Vector3d& position_m,
                                 Eigen::Vector3d* at_last_position_n);
   // The model's force at x, within the bounds above (count: into stats_).

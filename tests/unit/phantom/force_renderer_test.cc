@@ -16,6 +16,7 @@
 #include <limits>
 
 #include "phantom.h"
+#include "render_chain.h"
 
 namespace hapco::phantom {
 namespace {
@@ -176,6 +177,32 @@ TEST(ForceRenderer, FrictionSticksAndSlipsOnTheDevice) {
   r.Command(false, {}, m, Eigen::Vector3d(0, 0, 5e-3), {}, kTick);
   EXPECT_NEAR(RenderAt(&r, {0, 0, 2}, m, Eigen::Vector3d(1e-4, 0, -1e-3), 10).x(), -0.8, 1e-12);
   EXPECT_NEAR(r.Command(false, {}, m, Eigen::Vector3d(1.5e-4, 0, -1e-3), {}, kTick).x(), -0.8 - 0.15, 1e-12);
+}
+
+TEST(ForceRenderer, ASlideRendersTheConesFrictionThroughTheSafetyFilter) {
+  // hapco-phantom --render local-model on benchmark 1's scene path (docs/network-haptics.md):
+  // the device slides at 0.1 mm a tick under a contact that slides too, a new model every tick.
+  // What reaches the device is the plane's normal force and the cone's friction, mu F_n against
+  // the motion, and stays there: the friction at the cone's edge does not change with the motion,
+  // so the safety filter must not take the anchor's slip for a change the motion explains.
+  // (It did: -k dx a tick, -0.3 N at the 3000 N/m cap, beyond the filter's 0.25 N a tick, so the
+  // drag grew by 0.05 N every tick, to -5.7 N after 12 mm where the server said -1.6 N.)
+  SafetyParameters safety;
+  RenderChain chain(LocalModel(), safety);
+  const double mu = 0.3, normal_n = 4.8;
+  ReceivedModel m = TopFaceModel(-3e-3, 1600, mu);
+  m.stiffness_n_per_m = Eigen::Vector3d(-4000, -4000, -1600).asDiagonal();  // sticking across, capped at 3000
+  Eigen::Vector3d rendered = Eigen::Vector3d::Zero();
+  double largest_across_n = 0;
+  for (int tick = 1; tick <= 300; ++tick) {
+    const Eigen::Vector3d x(1e-4 * tick, 0, -3e-3);
+    m.position_m = x;  // the server answers this very pose (no delay): only the device's own rendering is tested
+    rendered = chain.Tick(true, {-mu * normal_n, 0, normal_n}, m, x, {0.1, 0, 0}, kTick * tick);
+    if (tick > 50) largest_across_n = std::max(largest_across_n, std::abs(rendered.x()));
+  }
+  EXPECT_NEAR(rendered.z(), normal_n, 1e-9);
+  EXPECT_NEAR(rendered.x(), -mu * normal_n, 1e-6) << "kinetic friction, against the motion";
+  EXPECT_LE(largest_across_n, mu * normal_n + 1e-6);
 }
 
 TEST(ForceRenderer, TheSurfaceAheadIsFeltWhereTheDeviceMeetsIt) {
