@@ -73,7 +73,10 @@ void LocalModelBuilder::LinearizeContacts(const TwoBodySession& session) {
   for (int alpha = 0; alpha < m; ++alpha) {
     const ContactSample sample = session.SampleContact(alpha);
     const Eigen::Vector3d r = result.force_n.segment<3>(3 * alpha);
-    normal_force_n += r[0] * sample.normal;
+    // The normal comes from the active set only: a separating contact's force is round-off
+    // (a tool exactly on the surface leaves ~1e-11 N on every contact), and a normal without
+    // the stiffness of an active contact is a model that pushes back without any stiffness.
+    if (sample.state != contact::ContactState::kSeparating) normal_force_n += r[0] * sample.normal;
     const bool stick_like = sample.state == contact::ContactState::kSticking ||
                             (sample.state == contact::ContactState::kSliding && sliding_ == Sliding::kAsSticking);
     if (stick_like) {

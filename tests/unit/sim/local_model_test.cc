@@ -196,6 +196,26 @@ TEST(LocalContactModel, ContactForcesPerDeviceTranslationMatchTheStepsProblemSol
   }
 }
 
+TEST(LocalContactModel, ATouchWithoutForceGivesNoContactModel) {
+  // The tool on the bar to round-off (1e-15 m in, as a device's encoder grid can land it): the
+  // step finds the contacts, and the solver leaves ~1e-11 N on them, every one separating.
+  // No contact pushes, so there is no contact model: a normal without a stiffness would make a
+  // client replay the next forces uncapped and unchanged wherever it moves
+  // (client/phantom/force_renderer.h), and multirate answers would follow it (multirate.h).
+  for (const double friction : {0.0, 0.3}) {
+    const TwoBodyModel model(testing::CoarseTestScene(friction));  // the scenes' global Uzawa
+    TwoBodySession session(model);
+    const StepOutput& out = session.Step(Eigen::Vector3d(0, 0, -1e-15));  // 1e-15 m in: round-off forces
+    ASSERT_GT(out.num_contacts, 0) << "resting on the bar: contacts at zero gap";
+    ASSERT_LT(out.device_force_n.norm(), 1e-9);
+    const LocalContactModel local = LinearizeLastStep(session);
+    EXPECT_EQ(local.sticking + local.sliding, 0);
+    EXPECT_EQ(local.normal_device, Eigen::Vector3d::Zero()) << "mu " << friction << ": " << local.normal_device.transpose()
+                                                            << " from a force of " << out.device_force_n.norm() << " N";
+    EXPECT_EQ(local.stiffness_n_per_m, Eigen::Matrix3d::Zero());
+  }
+}
+
 TEST(LocalContactModel, NoContactGivesNoStiffness) {
   const TwoBodyModel model(CoarseScene(0.3));
   TwoBodySession session(model);
