@@ -91,7 +91,8 @@ class CommandLine {
   CLI::Option* AddWorkspace(double* metres, const std::string& help);
   CLI::Option* AddMaxJump(double* metres, const std::string& help);
   // --physics-every K and --model-distance-m X: multirate answering (sim/multirate.h), group
-  // "Multirate"; the same meaning in hapco-server and hapco-sim.
+  // "Multirate"; the same meaning in hapco-server and hapco-sim. Parse notes a distance given
+  // without K > 1 (it has no effect then).
   void AddMultirate(int* physics_every, double* max_model_distance_m);
 
   // `old_name` (e.g. "--record") keeps working as `current_name` ("--output"), with a note on
@@ -115,6 +116,7 @@ class CommandLine {
   std::string tool_, synopsis_, description_, footer_;
   CLI::App app_;
   std::map<std::string, std::string> deprecated_;          // old spelling -> current ("" = drop)
+  const int* multirate_physics_every_ = nullptr;            // AddMultirate's K, for Parse's note
   std::map<std::string, std::vector<std::string>> choices_;  // option name -> accepted values
   std::map<std::string, std::string> metavars_;              // option name -> FILE, DIR, N, ...
 };

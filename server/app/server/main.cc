@@ -137,6 +137,9 @@ bool Parse(int argc, char** argv, Options* options) {
   }
   options->server.physics =
       physics == "none" ? hapco::service::SessionPhysics::kNone : hapco::service::SessionPhysics::kContact;
+  if (options->server.physics == hapco::service::SessionPhysics::kNone && options->server.multirate.physics_every > 1) {
+    std::fprintf(stderr, "hapco-server: note: --physics-every has no effect with --physics none (no physics to skip)\n");
+  }
   if (time_budget_ms >= 0) options->server.time_budget_s = time_budget_ms * 1e-3;
   options->server.local_model = !no_local_model;
   options->server.log = !quiet;

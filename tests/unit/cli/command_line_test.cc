@@ -90,6 +90,35 @@ TEST(CommandLineTest, OldSpellingsKeepWorkingWithANote) {
   EXPECT_NE(notes.find("--scene is deprecated: give the file as an argument"), std::string::npos) << notes;
 }
 
+TEST(CommandLineTest, MultirateDistanceIsBoundedAndNotedWhenItHasNoEffect) {
+  const auto parse = [](const std::vector<std::string>& arguments, int* every, double* distance, std::string* notes) {
+    TOY_COMMAND(command);
+    command.AddMultirate(every, distance);
+    testing::internal::CaptureStderr();
+    try {
+      (void)command.Parse(arguments);
+    } catch (const InputError& error) {
+      *notes = testing::internal::GetCapturedStderr();
+      return std::string(error.what());
+    }
+    *notes = testing::internal::GetCapturedStderr();
+    return std::string();
+  };
+  int every = 1;
+  double distance = 5e-4;
+  std::string notes;
+  EXPECT_EQ(parse({"--model-distance-m", "1e-3"}, &every, &distance, &notes), "");
+  EXPECT_DOUBLE_EQ(distance, 1e-3);
+  EXPECT_NE(notes.find("hapco-toy: note: --model-distance-m has no effect without --physics-every K > 1"),
+            std::string::npos)
+      << notes;
+  EXPECT_EQ(parse({"--physics-every", "8", "--model-distance-m", "2e-3"}, &every, &distance, &notes), "");
+  EXPECT_EQ(every, 8);
+  EXPECT_EQ(notes, "") << "a distance with K > 1 is what it is for";
+  EXPECT_EQ(parse({"--physics-every", "8", "--model-distance-m", "0.01"}, &every, &distance, &notes),
+            "--model-distance-m expects a number in [0, 0.002], got '0.01'");
+}
+
 TEST(CommandLineTest, HelpIsGroupedAndVersionIsListed) {
   ToyOptions options;
   TOY_COMMAND(command);
