@@ -136,29 +136,49 @@ int Run(const Options& options) {
                 1e6 * percentile(server_times, 0.5), 1e6 * percentile(server_times, 0.99),
                 1e6 * percentile(server_times, 1.0));
   }
-  if (!statuses.empty()) {
-    const auto& s = *statuses.back();
+  // Status records per server, in the order each first appears: a recording can hold several
+  // servers (clients moved after a failover, a restarted server), and each one's counters are
+  // its own (before, the last record's server was credited with every record).
+  std::vector<std::string> status_servers;
+  std::map<std::string, std::vector<const hapco::recording::ServerStatus*>> statuses_of;
+  for (const auto* status : statuses) {
+    auto& list = statuses_of[status->server_id()];
+    if (list.empty()) status_servers.push_back(status->server_id());
+    list.push_back(status);
+  }
+  if (status_servers.size() > 1) {
+    std::string names;
+    for (const std::string& id : status_servers) {
+      names += (names.empty() ? "" : ", ") + id + " (" + std::to_string(statuses_of[id].size()) + ")";
+    }
+    std::printf("status     %zu records from %zu servers: %s\n", statuses.size(), status_servers.size(), names.c_str());
+  }
+  for (const std::string& id : status_servers) {
+    const auto& mine = statuses_of[id];
+    const auto& s = *mine.back();
     std::printf("status     %zu records from %s; last: uptime %.1f s, %u sessions, step p50 %.1f us, p99 %.1f us, "
                 "max %.1f us\n",
-                statuses.size(), s.server_id().c_str(), s.uptime_s(), s.sessions(), 1e6 * s.step_time_p50_s(),
+                mine.size(), s.server_id().c_str(), s.uptime_s(), s.sessions(), 1e6 * s.step_time_p50_s(),
                 1e6 * s.step_time_p99_s(), 1e6 * s.step_time_max_s());
-    double worst_p99_s = 0, worst_max_s = 0;
-    for (const auto* status : statuses) {
+    double worst_p99_s = 0, worst_max_s = 0, peak_cpu = 0;
+    for (const auto* status : mine) {
       worst_p99_s = std::max(worst_p99_s, status->step_time_p99_s());
       worst_max_s = std::max(worst_max_s, status->step_time_max_s());
+      peak_cpu = std::max(peak_cpu, status->cpu_use());
     }
-    double peak_cpu = 0;
-    for (const auto* status : statuses) peak_cpu = std::max(peak_cpu, status->cpu_use());
-    std::printf("status     worst status period: step p99 %.1f us, max %.1f us; server CPU peak %.0f %% of a core\n",
-                1e6 * worst_p99_s, 1e6 * worst_max_s, 100.0 * peak_cpu);
-    std::printf("server     %llu steps, superseded poses %llu, contact frames dropped %llu, non-finite forces %llu "
+    // With several servers each line names its server.
+    const std::string who = status_servers.size() > 1 ? s.server_id() + ": " : std::string();
+    std::printf("status     %sworst status period: step p99 %.1f us, max %.1f us; server CPU peak %.0f %% of a core\n",
+                who.c_str(), 1e6 * worst_p99_s, 1e6 * worst_max_s, 100.0 * peak_cpu);
+    std::printf("server     %s%llu steps, superseded poses %llu, contact frames dropped %llu, non-finite forces %llu "
                 "(last status)\n",
-                static_cast<unsigned long long>(s.steps()), static_cast<unsigned long long>(s.superseded()),
+                who.c_str(), static_cast<unsigned long long>(s.steps()), static_cast<unsigned long long>(s.superseded()),
                 static_cast<unsigned long long>(s.contact_frames_dropped()),
                 static_cast<unsigned long long>(s.non_finite_forces()));
-    std::printf("bad input  nan %llu, workspace %llu, jumps %llu, out-of-order %llu, duplicates %llu, "
+    std::printf("bad input  %snan %llu, workspace %llu, jumps %llu, out-of-order %llu, duplicates %llu, "
                 "unknown clients %llu, floods %llu (server counters, last status)\n",
-                static_cast<unsigned long long>(s.bad_pose_nan()), static_cast<unsigned long long>(s.out_of_workspace()),
+                who.c_str(), static_cast<unsigned long long>(s.bad_pose_nan()),
+                static_cast<unsigned long long>(s.out_of_workspace()),
                 static_cast<unsigned long long>(s.position_jumps()), static_cast<unsigned long long>(s.out_of_order()),
                 static_cast<unsigned long long>(s.duplicates()), static_cast<unsigned long long>(s.unknown_clients()),
                 static_cast<unsigned long long>(s.floods()));

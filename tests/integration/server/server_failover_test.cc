@@ -409,6 +409,11 @@ TEST(ServerFailover, ThreeServersServeEachClientOnceAndTakeOverTheClientsOfOneTh
     EXPECT_NE(line.find(" on " + killed), std::string::npos) << line;
     EXPECT_NE(line.find(" on " + seen[client].last_server), std::string::npos) << line;
   }
+  // Each server's status records and counters are its own, the killed one's included.
+  EXPECT_NE(report_text.find(" servers: "), std::string::npos) << report_text;
+  for (const std::string& id : {killed, seen.begin()->second.last_server}) {
+    EXPECT_NE(report_text.find("server     " + id + ": "), std::string::npos) << id << "\n" << report_text;
+  }
   // Most of the 4 x 6000 poses (under load some are superseded; the killed trace loses its buffer).
   EXPECT_GT(stepped_by.size(), static_cast<std::size_t>(kClients) * 3000u);
 }
