@@ -242,6 +242,8 @@ class Recorder {
     status->set_superseded(s.superseded);
     status->set_contact_frames_dropped(s.contact_frames_dropped);
     status->set_non_finite_forces(s.non_finite_forces);
+    status->set_answers_between_steps(s.answers_between_steps);
+    status->set_turn_steps(s.turn_steps);
     writer_->Append(record_);
     ++status_records_;
   }

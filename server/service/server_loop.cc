@@ -558,6 +558,8 @@ void ServerLoop::PublishStatus(int64_t now_ns, bool period_end) {
   status->superseded = all.superseded;
   status->contact_frames_dropped = all.contact_frames_dropped;
   status->non_finite_forces = all.non_finite_forces;
+  status->answers_between_steps = all.model_answers;
+  status->turn_steps = all.turn_steps;
   // Stage split: sessions' sums since the last period end (their times are taken only then, so
   // a status published early reports the running period).
   SessionStageTimes stages = stage_times_;

@@ -175,6 +175,13 @@ int Run(const Options& options) {
                 who.c_str(), static_cast<unsigned long long>(s.steps()), static_cast<unsigned long long>(s.superseded()),
                 static_cast<unsigned long long>(s.contact_frames_dropped()),
                 static_cast<unsigned long long>(s.non_finite_forces()));
+    if (s.answers_between_steps() > 0 || s.turn_steps() > 0) {
+      // Multirate: forces sent between the steps above, which a recording does not hold.
+      std::printf("server     %s%llu poses answered between steps (--physics-every; not in this recording), %llu extra "
+                  "steps at turning poses (last status)\n",
+                  who.c_str(), static_cast<unsigned long long>(s.answers_between_steps()),
+                  static_cast<unsigned long long>(s.turn_steps()));
+    }
     std::printf("bad input  %snan %llu, workspace %llu, jumps %llu, out-of-order %llu, duplicates %llu, "
                 "unknown clients %llu, floods %llu (server counters, last status)\n",
                 who.c_str(), static_cast<unsigned long long>(s.bad_pose_nan()),

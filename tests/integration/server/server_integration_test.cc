@@ -440,6 +440,14 @@ TEST(ServerProcess, MultirateAnswersAreTheOfflineMultirateReplay) {
             std::string::npos)
       << recorder_out;
   EXPECT_NE(recorder_out.find("forces answered between steps"), std::string::npos) << recorder_out;
+  // The report says how many poses the recording's steps left out (the server's last status,
+  // sent when the server stopped, after the phantom's session closed).
+  Process report({HAPCO_REPORT_EXE, dir + "/multirate.hapco"}, dir + "/report.out", dir + "/report.err");
+  ASSERT_EQ(report.Wait(60'000), 0) << ReadFile(dir + "/report.err");
+  const std::string report_text = ReadFile(dir + "/report.out");
+  EXPECT_NE(report_text.find("server     " + std::to_string(replay_model) + " poses answered between steps"),
+            std::string::npos)
+      << "replay: " << replay_model << " model answers\n" << report_text;
 }
 
 // A banded compliance too short for the tool (contact.compliance_range_m below its extent):
