@@ -152,13 +152,24 @@ void RunLocalModelClient(bool server_sends_models, const std::string& tag) {
   EXPECT_GE(Num(s, "passivity_dissipated_j"), 0.0);
   EXPECT_GT(Int(s, "forces"), 1500);
   EXPECT_EQ(Int(s, "non_finite_rendered"), 0);
+  const auto ticks = ReadCsv(dir + "/ticks-lm-1.csv");
+  ASSERT_FALSE(ticks.empty());
+  // The coarse scene's path presses and slides for about 0.3 s of the 3 s, then the hand holds
+  // the device at home, on the bar with round-off forces (~1e-14 N), where a contact model is
+  // kept or not depending on which answer arrives where (force_renderer.h). So: every tick with
+  // a real contact force renders from a model. (This asserted "> 1000 model ticks", which held
+  // only because round-off forces used to come with a model without stiffness.)
+  long contact_ticks = 0;
+  for (const auto& t : ticks) {
+    const Eigen::Vector3d raw = Vec(t, "raw_fx_n", "raw_fy_n", "raw_fz_n");
+    if (raw.allFinite() && raw.norm() > 1e-6) ++contact_ticks;
+  }
   if (server_sends_models) {
-    EXPECT_GT(Int(s, "model_ticks"), 1000) << "the coarse scene presses and slides: in contact most of the run";
+    EXPECT_GT(contact_ticks, 200) << "the coarse scene presses and slides";
+    EXPECT_GE(Int(s, "model_ticks"), contact_ticks * 9 / 10) << contact_ticks << " ticks with a contact force";
   } else {
     EXPECT_EQ(Int(s, "model_ticks"), 0) << "no model sent: forces rendered as they come";
   }
-  const auto ticks = ReadCsv(dir + "/ticks-lm-1.csv");
-  ASSERT_FALSE(ticks.empty());
   // The passivity damper -α v (α <= 100 N s/m) comes after the rate limit and may switch on or
   // off between ticks: a tick's change may add 100 N s/m times both ticks' speeds.
   Eigen::Vector3d previous_f = Eigen::Vector3d::Zero(), previous_x = Vec(ticks[0], "x_m", "y_m", "z_m");
