@@ -67,18 +67,26 @@ Eigen::Vector3d SafetyFilter::Update(bool fresh, const Eigen::Vector3d& raw_n, d
     ramp_duration_s_ = std::max(parameters_.ramp_s, rendered_.norm() / rate_n_per_s);
     target_n_.setZero();
   }
+  const double max_step = parameters_.max_change_per_tick_n;
   if (stale_) {
     ++stale_ticks_;
     const double remaining = 1.0 - (now_s - ramp_start_s_) / ramp_duration_s_;
     // The ramp only decreases what is rendered (never increases after a reset).
+    Eigen::Vector3d ramp_n = rendered_;
     if (remaining <= 1e-9) {  // (the end of the ramp, not a rounding residue)
-      rendered_.setZero();
+      ramp_n.setZero();
     } else if (rendered_.norm() > remaining * ramp_from_n_.norm()) {
-      rendered_ = ramp_from_n_ * remaining;
+      ramp_n = ramp_from_n_ * remaining;
     }
+    // Still at most max_step per tick: after a stall of this process (ticks late, the motors
+    // holding the last force meanwhile) the line may be far below what the hand feels, and
+    // jumping to it is the click the rate limit exists to prevent. The ramp then ends up to
+    // |F| / max_step ticks after the stall instead of on time.
+    const Eigen::Vector3d delta = ramp_n - rendered_;
+    const double delta_norm = delta.norm();
+    rendered_ = delta_norm > max_step ? Eigen::Vector3d(rendered_ + delta * (max_step / delta_norm)) : ramp_n;
     return rendered_;
   }
-  const double max_step = parameters_.max_change_per_tick_n;
   if (motion_n.allFinite()) rendered_ += motion_n;  // the device's own motion: not limited
   const Eigen::Vector3d delta = target_n_ - rendered_;
   const double delta_norm = delta.norm();

@@ -24,9 +24,10 @@ struct SafetyParameters {
   // 0 -> 7.9 N in 32 ms, slow enough to avoid a felt "click", fast enough for contact onset.
   double max_change_per_tick_n = 0.25;
   double timeout_s = 0.050;       // no new force for longer than this -> ramp to zero
-  // Duration of that ramp from the force at timeout to zero, s: linear in time (zero at a
-  // known time even if ticks are missed), and at least |F| / (250 N/s) so it respects the
-  // rate limit (7.9 N -> 31.6 ms).
+  // Duration of that ramp from the force at timeout to zero, s: linear in time from the
+  // timeout's expiry (zero at a known time while the ticks run), at least |F| / (250 N/s) so
+  // it respects the rate limit (7.9 N -> 31.6 ms). Ticks that come late (this process stalled)
+  // still change the force by at most max_change_per_tick_n each: never a jump.
   double ramp_s = 0.020;
   double tick_s = 0.001;          // servo period, s
 };
@@ -37,8 +38,8 @@ class SafetyFilter {
 
   // One tick at time now_s (monotonic, s). `fresh` = a new force sample arrived this tick
   // with value raw_n (may be NaN/Inf: then it is ignored and counted). Returns the force to
-  // render, N: finite, |F| <= max_force_n, |F - previous| <= max_change_per_tick_n (during a
-  // timeout ramp: <= 250 N/s times the time since the previous tick).
+  // render, N: finite, |F| <= max_force_n, |F - previous| <= max_change_per_tick_n on every
+  // tick, late ticks and the timeout ramp included.
   Eigen::Vector3d Update(bool fresh, const Eigen::Vector3d& raw_n, double now_s);
   // The same, where motion_n of the change is explained by the device's own motion through
   // a local contact model (force_renderer.h: F_model(x_now) - F_model(x_before), a spring of at

@@ -108,13 +108,17 @@ TEST(PhantomSafety, TimeoutRampsToZeroThenResumes) {
   EXPECT_NEAR((f - back).norm(), 0.0, 1e-12);
 }
 
-// A stalled client (ticks missed around the timeout) still reaches zero on time: the ramp is
-// linear in time from the moment the timeout expired, and at least |F| / 250 N/s long (the
-// rate limit), so the force is zero by last force + timeout + ramp.
-TEST(PhantomSafety, TimeoutRampIsOnTimeDespiteMissedTicks) {
+// The timeout ramp is linear in time from the moment the timeout expired and at least
+// |F| / 250 N/s long (the rate limit), so with ticks on time the force is zero by last force +
+// timeout + ramp. A stalled client (ticks late around the timeout; the motors held the last
+// force meanwhile) still changes the force by at most 0.25 N per tick: it follows the line
+// down from the force it held, never jumping to it (a late tick used to render the line's
+// value at once: 4.9 N -> 0 N in one tick after an 83 ms stall, seen by a helper session).
+TEST(PhantomSafety, TimeoutRampFollowsTheLineAndNeverJumpsAfterAStall) {
   SafetyParameters p;  // timeout 50 ms, ramp 20 ms, 0.25 N per 1 ms tick
   const double ramp_s = 7.9 / 250.0;  // longer than ramp_s = 20 ms: the rate limit rules
-  for (const double tick_gap_s : {0.007, 0.045}) {  // 6 of 7 ticks missed; a 45 ms stall
+  for (const double tick_gap_s : {0.001, 0.007, 0.045, 0.083}) {  // on time; 6 of 7 ticks missed; stalls
+    SCOPED_TRACE(tick_gap_s);
     SafetyFilter filter(p);
     const Eigen::Vector3d raw(0.0, 7.9, 0.0);
     double t = 0.0;
@@ -122,17 +126,30 @@ TEST(PhantomSafety, TimeoutRampIsOnTimeDespiteMissedTicks) {
     ASSERT_NEAR(filter.rendered().y(), 7.9, 1e-12);
     const double last_fresh = t - p.tick_s;
     const double ramp_start = last_fresh + p.timeout_s;
-    bool saw_ramp = false;
-    for (t = last_fresh + tick_gap_s; t < ramp_start + ramp_s + 0.1; t += tick_gap_s) {
+    double previous = 7.9;
+    int ticks_after_line_reached_zero = 0;
+    for (t = last_fresh + tick_gap_s; filter.rendered().norm() > 0.0 || t < ramp_start + ramp_s; t += tick_gap_s) {
       const double y = filter.Update(false, raw, t).y();
-      // 7.9 N until the timeout, then the line 7.9 N * (1 - (t - ramp_start) / ramp), then 0.
-      const double expected = t <= ramp_start ? 7.9 : std::max(0.0, 7.9 * (1.0 - (t - ramp_start) / ramp_s));
-      EXPECT_NEAR(y, expected, 1e-9) << "tick gap " << tick_gap_s << " s, t = " << t;
-      saw_ramp = saw_ramp || (y > 0.0 && y < 7.9);
+      // The line 7.9 N * (1 - (t - ramp_start) / ramp), from the timeout's expiry, then 0.
+      const double line = t <= ramp_start ? 7.9 : std::max(0.0, 7.9 * (1.0 - (t - ramp_start) / ramp_s));
+      // Down the line, or 0.25 N below the last tick where the line is further down: never both
+      // above the line and more than one tick's change from the last force.
+      EXPECT_NEAR(y, std::max(line, previous - p.max_change_per_tick_n), 1e-9) << "t = " << t;
+      EXPECT_LE(previous - y, p.max_change_per_tick_n + 1e-12) << "t = " << t;
+      EXPECT_GE(y, 0.0);
+      previous = y;
+      if (line == 0.0) ++ticks_after_line_reached_zero;
+      ASSERT_LT(ticks_after_line_reached_zero, 40) << "the force never reached zero";
     }
-    EXPECT_EQ(saw_ramp, tick_gap_s < ramp_s) << tick_gap_s;
     EXPECT_TRUE(filter.stale());
     EXPECT_EQ(filter.rendered().norm(), 0.0);
+    if (tick_gap_s == 0.001) {
+      // On time: zero by the line's end (within a tick).
+      EXPECT_LE(t, ramp_start + ramp_s + 2 * p.tick_s);
+    } else {
+      // After a stall: the whole 7.9 N in 0.25 N steps, 32 ticks.
+      EXPECT_GE(ticks_after_line_reached_zero, 1);
+    }
   }
 }
 
