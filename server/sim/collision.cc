@@ -12,15 +12,8 @@
 #include "common/error.h"
 
 namespace hapco::sim {
-namespace {
 
-constexpr int kLeafSize = 4;
-// Gaps closer than this fraction of the mean reference edge are ties (round-off between
-// coplanar faces sharing an edge).
-constexpr double kTieRelative = 1e-9;
-
-// Ericson, Real-Time Collision Detection §5.1.5: barycentric coordinates (of a, b, c) of the
-// point of triangle abc closest to p, by Voronoi region.
+// Ericson, Real-Time Collision Detection §5.1.5, by Voronoi region.
 Eigen::Vector3d ClosestPointBarycentric(const Eigen::Vector3d& p, const Eigen::Vector3d& a,
                                         const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
   const Eigen::Vector3d ab = b - a;
@@ -57,6 +50,14 @@ Eigen::Vector3d ClosestPointBarycentric(const Eigen::Vector3d& p, const Eigen::V
   const double w = vc * denom;
   return {1.0 - v - w, v, w};
 }
+
+namespace {
+
+constexpr int kLeafSize = 4;
+// Gaps closer than this fraction of the mean reference edge are ties (round-off between
+// coplanar faces sharing an edge).
+constexpr double kTieRelative = 1e-9;
+
 
 Eigen::Vector3d Row(const PointsRef& points, int i) { return points.row(i).transpose(); }
 

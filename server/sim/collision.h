@@ -272,6 +272,10 @@ class ContactDetector {
   DetectorStats stats_;
 };
 
+// Barycentric coordinates (of a, b, c) of the point of triangle abc closest to p.
+Eigen::Vector3d ClosestPointBarycentric(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b,
+                                        const Eigen::Vector3d& c);
+
 // Barycentric coordinates (of a, b, c) of the normal projection of p onto the plane of abc.
 Eigen::Vector3d ProjectionBarycentric(const Eigen::Vector3d& p, const Eigen::Vector3d& a,
                                       const Eigen::Vector3d& b, const Eigen::Vector3d& c);

@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -108,7 +109,8 @@ int Run(const Options& options) {
 
   if (compliance) {
     hapco::Stopwatch watch;
-    const hapco::sim::TwoBodyModel model(scene);
+    const std::unique_ptr<hapco::sim::TwoBodyModel> model_owner = hapco::io::MakeSceneModel(scene, scene_path);
+    const hapco::sim::TwoBodyModel& model = *model_owner;
     const auto& o = model.obstacle_surface();
     const auto& t = model.tool_surface();
     const auto mib = [](std::size_t bytes) { return static_cast<double>(bytes) / (1 << 20); };

@@ -162,7 +162,7 @@ int Run(const Options& options) {
       std::fflush(stdout);
     }
     hapco::Stopwatch scene_watch;
-    models.push_back(std::make_unique<hapco::sim::TwoBodyModel>(hapco::io::LoadSceneFile(path)));
+    models.push_back(hapco::io::MakeSceneModel(hapco::io::LoadSceneFile(path), path));
     served.push_back(models.back().get());
     if (options.server.log) {
       const hapco::sim::TwoBodyModelStats& stats = models.back()->stats();

@@ -272,7 +272,8 @@ int Run(const Options& options) {
   // The CSV stream is closed on every path out of Run (its partial file is then removed).
   const std::unique_ptr<std::FILE, int (*)(std::FILE*)> csv_closer(csv, [](std::FILE* f) { return f ? std::fclose(f) : 0; });
   hapco::Stopwatch setup;
-  const hapco::sim::TwoBodyModel model(scene);
+  const std::unique_ptr<hapco::sim::TwoBodyModel> model_owner = hapco::io::MakeSceneModel(scene, options.scene_path);
+  const hapco::sim::TwoBodyModel& model = *model_owner;
   const auto& model_stats = model.stats();
   const bool progress = !options.quiet && isatty(fileno(stderr));
   std::printf("scene %s: obstacle %d dofs, tool %d dofs; %zu obstacle + %zu tool candidate nodes; "

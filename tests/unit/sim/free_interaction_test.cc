@@ -103,6 +103,60 @@ TEST(FreeInteractionTest, ToolStartingInsideTheObstacleIsRefusedWithItsDepth) {
   }
 }
 
+// Deeper than contact detection reaches (a new contact at most 0.45 of the bar's 20 mm), or
+// wholly inside: the bodies' volumes overlap. These were accepted with a note that no node
+// faced the obstacle, and then gave 0 N on every step (a helper session's 4 mm cube placed
+// inside a block). Also a bar inside a tool large enough to hold it.
+TEST(FreeInteractionTest, ToolWhollyOrDeeplyInsideTheObstacleIsRefusedWithItsDepth) {
+  struct Case {
+    const char* what;
+    Eigen::Vector3d min_corner_m, size_m;
+    const char* expected;  // in the message
+  };
+  const Case cases[] = {
+      // A 4 mm cube at the bar's centre line: every node is 8-12 mm from the faces it could
+      // face, beyond the 9 mm detection reaches.
+      {"cube wholly inside", {0.048, 0.008, 0.008}, {0.004, 0.004, 0.004}, "tool node"},
+      // The paper's tool 10 mm into the bar (top flush with the bar's): its bottom face is
+      // deeper than detection reaches.
+      {"tool 10 mm deep", {0.04, 0.0, 0.01}, {0.02, 0.02, 0.01}, "tool node"},
+      // A tool box around the whole bar: the bar's nodes are inside the tool.
+      {"bar inside the tool", {-0.01, -0.01, -0.01}, {0.12, 0.04, 0.04}, "obstacle node"},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.what);
+    SceneSpec scene = BarScene(true);
+    scene.tool.box.min_corner_m = c.min_corner_m;
+    scene.tool.box.size_m = c.size_m;
+    try {
+      const TwoBodyModel model(scene);
+      FAIL() << "accepted";
+    } catch (const InputError& error) {
+      const std::string message = error.what();
+      EXPECT_NE(message.find("starts inside the obstacle"), std::string::npos) << message;
+      EXPECT_NE(message.find(c.expected), std::string::npos) << message;
+      EXPECT_NE(message.find("mm inside the"), std::string::npos) << message;
+    }
+  }
+  // The deepest node's distance: the cube's centre node (50, 10, 10) mm is 10 mm from the
+  // bar's side, top and bottom faces (a node of the bar's own mesh too: on its tetrahedra's
+  // shared corners, not strictly inside any one of them).
+  SceneSpec scene = BarScene(true);
+  scene.tool.box.min_corner_m = {0.048, 0.008, 0.008};
+  scene.tool.box.size_m = {0.004, 0.004, 0.004};
+  try {
+    const TwoBodyModel model(scene);
+    FAIL() << "accepted";
+  } catch (const InputError& error) {
+    EXPECT_NE(std::string(error.what()).find(" is 10 mm inside the obstacle"), std::string::npos) << error.what();
+  }
+  // Touching is not inside: resting on the bar, or against its end face from outside.
+  EXPECT_NO_THROW(TwoBodyModel{BarScene(true)});
+  SceneSpec beside = BarScene(true);
+  beside.tool.box.min_corner_m = {0.10, 0.0, 0.005};
+  EXPECT_NO_THROW(TwoBodyModel{beside});
+}
+
 TEST(FreeInteractionTest, ToolStartingAwayGetsANoteWithItsDistance) {
   EXPECT_EQ(StartingPositionNote(TwoBodyModel(BarScene(true))), "") << "resting on the bar";
   SceneSpec scene = BarScene(true);
