@@ -5,8 +5,10 @@
 
 #include <algorithm>
 #include <array>
+#include <cctype>
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -47,6 +49,81 @@ std::string ReadWholeFile(const std::string& path) {
   text << in.rdbuf();
   return text.str();
 }
+
+// Gmsh's `Exit;` ends the whole process (exit(0)) while it parses the file: a server or tool
+// reading a batch-style .geo ("Mesh 3; Save ...; Exit;") vanished without a word and with exit
+// status 0 (found by a helper session). The command is refused before Gmsh reads the file,
+// with its line, in the file and in the files it Includes; ExitGuard catches what a scan
+// cannot see.
+void RefuseExitCommand(const std::string& top_path, const std::string& path, int include_depth) {
+  const std::string text = ReadWholeFile(path);
+  int line = 1;
+  auto is_word = [](char c) { return std::isalnum(static_cast<unsigned char>(c)) != 0 || c == '_'; };
+  for (std::size_t i = 0; i < text.size(); ++i) {
+    const char c = text[i];
+    if (c == '\n') {
+      ++line;
+    } else if (c == '/' && i + 1 < text.size() && text[i + 1] == '/') {
+      while (i + 1 < text.size() && text[i + 1] != '\n') ++i;
+    } else if (c == '/' && i + 1 < text.size() && text[i + 1] == '*') {
+      for (i += 2; i + 1 < text.size() && !(text[i] == '*' && text[i + 1] == '/'); ++i) line += text[i] == '\n';
+      ++i;
+    } else if (c == '"') {
+      for (++i; i < text.size() && text[i] != '"'; ++i) {
+        if (text[i] == '\\') ++i;
+        else line += text[i] == '\n';
+      }
+    } else if (is_word(c) && (i == 0 || !is_word(text[i - 1]))) {
+      std::size_t end = i;
+      while (end < text.size() && is_word(text[end])) ++end;
+      const std::string word = text.substr(i, end - i);
+      if (word == "Exit") {
+        Fail(top_path, (path == top_path ? std::string() : "included file " + path + ", ") + "line " + std::to_string(line) +
+                       ": `Exit` would end this program while Gmsh reads the file; remove it (HapCo meshes the "
+                       "geometry and caches the mesh itself: no Mesh, Save or Exit commands are needed)");
+      }
+      if (word == "Include" && include_depth < 16) {
+        // Include "file"; relative to the including file's folder.
+        std::size_t q = text.find('"', end);
+        const std::size_t q_end = q == std::string::npos ? q : text.find('"', q + 1);
+        if (q != std::string::npos && q_end != std::string::npos && text.find_first_not_of(" \t\r\n", end) == q) {
+          fs::path included = text.substr(q + 1, q_end - q - 1);
+          if (included.is_relative()) included = fs::path(path).parent_path() / included;
+          std::error_code error;
+          if (fs::is_regular_file(included, error)) RefuseExitCommand(top_path, included.string(), include_depth + 1);
+        }
+      }
+      i = end - 1;
+    }
+  }
+}
+
+// Set while Gmsh reads or meshes a file: if Gmsh ends the process then (an Exit the scan
+// missed), say so on stderr and exit with status 1 (bad input), not Gmsh's 0.
+class ExitGuard {
+ public:
+  explicit ExitGuard(const std::string& path) {
+    static const bool registered = [] { return std::atexit(&ExitGuard::OnExit) == 0; }();
+    (void)registered;
+    Path() = path;
+  }
+  ~ExitGuard() { Path().clear(); }
+  ExitGuard(const ExitGuard&) = delete;
+  ExitGuard& operator=(const ExitGuard&) = delete;
+
+ private:
+  static std::string& Path() {
+    static std::string path;
+    return path;
+  }
+  static void OnExit() {
+    if (Path().empty()) return;
+    std::fprintf(stderr, "error: %s: Gmsh ended the program while reading it (an Exit command?); remove it\n",
+                 Path().c_str());
+    std::fflush(stderr);
+    _exit(1);
+  }
+};
 
 // Gmsh writes its messages to a logger we start per import; the first "Error" is the user's.
 class GmshSession {
@@ -260,6 +337,8 @@ ImportedMesh ImportMeshWithGmsh(const MeshRequest& request, GmshSession* session
       // Set before the .geo is read, so that it can size refined regions from it
       // (`h = Mesh.MeshSizeMax;`, as tests/data/meshes/hertz_*.geo do).
       gmsh::option::setNumber("Mesh.MeshSizeMax", request.mesh_size);
+      RefuseExitCommand(path, path, 0);
+      const ExitGuard guard(path);
       gmsh::open(path);
       session.ThrowOnError(path, "read it");
       MeshGeo(request, &session);

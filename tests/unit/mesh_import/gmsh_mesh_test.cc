@@ -208,6 +208,32 @@ TEST_F(GmshMeshTest, BadFilesAreRefusedWithOneLineNamingTheFileAndTheFault) {
   EXPECT_NE(pieces.find("2 disconnected pieces"), std::string::npos) << pieces;
 }
 
+// Gmsh's Exit command ends the process (status 0) while Gmsh reads the file: a batch-style
+// .geo made a tool vanish without a word. It is refused with its line, also in an Included
+// file; the word in a comment or a string is not a command. (Were the scan to miss one, this
+// test binary would end with status 0 mid-run and ctest would report it: the ExitGuard turns
+// that into status 1.)
+TEST_F(GmshMeshTest, ExitCommandIsRefusedWithItsLineInsteadOfEndingTheProgram) {
+  const std::string box = "SetFactory(\"OpenCASCADE\");\nBox(1) = {0, 0, 0, 10, 10, 10};\n";
+  const std::string batch = ExpectRefused(Request(Write("batch.geo", box + "Mesh 3;\nExit;\n"), fem::ElementOrder::kTet4, 5));
+  EXPECT_NE(batch.find("line 4: `Exit` would end this program"), std::string::npos) << batch;
+  Write("tail.geo", "// made by hand\nExit;\n");
+  const std::string included =
+      ExpectRefused(Request(Write("main.geo", box + "Include \"tail.geo\";\n"), fem::ElementOrder::kTet4, 5));
+  EXPECT_NE(included.find("included file"), std::string::npos) << included;
+  EXPECT_NE(included.find("tail.geo, line 2"), std::string::npos) << included;
+  // Only words: a comment, a block comment over lines, a string, a longer name.
+  const ImportedMesh fine = ImportMesh(Request(
+      Write("fine.geo", box + "// Exit;\n/* Exit;\n Exit; */\nPrintf(\"Exit;\");\nExitCode = 1;\nPhysical Volume(\"v\") = {1};\n"),
+      fem::ElementOrder::kTet4, 5));
+  EXPECT_GT(fine.mesh.num_elements(), 0);
+  // An Include whose name is computed is not followed by the scan: Gmsh then runs the Exit,
+  // and the guard turns its status 0 into 1 with a message on stderr.
+  const MeshRequest computed = Request(Write("computed.geo", box + "Include StrCat(\"ta\", \"il.geo\");\n"),
+                                       fem::ElementOrder::kTet4, 5);
+  EXPECT_EXIT(ImportMesh(computed), ::testing::ExitedWithCode(1), "Gmsh ended the program while reading it");
+}
+
 // A hand-written MSH 2.2 file with one tetrahedron, corners in the given order.
 std::string OneTetrahedron(const char* corners) {
   return std::string("$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n4\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n$EndNodes\n"
