@@ -154,6 +154,7 @@ ServerLoop::Client* ServerLoop::OpenSession(const std::string& client_id, const 
     client.session = std::make_unique<Session>(client_id, model, participant_, force_topic_, contact_topic_,
                                                options_.time_budget_s, options_.physics, options_.local_model,
                                                options_.server_id, options_.multirate);
+    client.session->set_trace(options_.trace);
     auto [it, inserted] = sessions_.emplace(client_id, std::move(client));
     HAPCO_ASSERT(inserted, "OpenSession: session exists already");
     ++counters_.sessions_opened;
@@ -450,14 +451,6 @@ void ServerLoop::StepQueued() {
       const int64_t ns = client.step_ns[slot];
       step_times_us_.push_back(static_cast<double>(ns) * 1e-3);
       if (k > 0) ++counters_.burst_steps;
-      if (options_.trace != nullptr) {
-        const hapco_idl_DevicePose& pose = client.stepped.pose(k);
-        const auto& p = pose.position_m;
-        const Eigen::Vector3d& f = client.sent_force_n[slot];
-        std::fprintf(options_.trace, "%s,%llu,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%.3f\n", id.c_str(),
-                     static_cast<unsigned long long>(pose.sequence_number), p.x, p.y, p.z, f.x(), f.y(), f.z(),
-                     static_cast<double>(ns) * 1e-3);
-      }
     }
     if (client.session->counters().non_finite_forces > 0 &&
         client.session->last_output().device_force_n.allFinite() == false) {

@@ -133,6 +133,12 @@ int64_t Session::StepAndPublish(const hapco_idl_DevicePose& pose, int64_t receiv
     AnchorModelAtAnswer(p);
   }
   force_.server_send_ns = MonotonicNowNs();
+  if (trace_ != nullptr) {
+    const auto& x = pose.position_m;
+    std::fprintf(trace_, "%s,%llu,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%.3f\n", client_id_.c_str(),
+                 static_cast<unsigned long long>(pose.sequence_number), x.x, x.y, x.z, force_n.x(), force_n.y(),
+                 force_n.z(), static_cast<double>(force_.server_send_ns - receive_ns) * 1e-3);
+  }
   if (force_writer_->Write(force_) != DDS_RETCODE_OK) ++counters_.force_write_errors;
   const int64_t written_ns = MonotonicNowNs();
   // This answer becomes the newest of the next force's repeated answers.

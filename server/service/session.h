@@ -3,6 +3,7 @@
 // validation state of its pose stream, and its own publisher (partition ClientPartition(id))
 // with the force and contact-state writers. Created by the server thread when the client
 // joins (SESSION_JOIN or its first valid pose), never inside a listener callback.
+#include <cstdio>
 #include <cstdint>
 #include <optional>
 #include <memory>
@@ -69,6 +70,13 @@ class Session {
           std::string_view server_id = {}, sim::MultirateParameters multirate = {});
 
   const std::string& client_id() const { return client_id_; }
+
+  // Step trace (hapco-server --trace): one CSV row per stepped pose (client, sequence, position,
+  // force, µs from arrival to the force being ready), written before the force is published,
+  // so that a killed server's trace holds every pose whose force a client may have received.
+  // The file is shared by the stepping threads (stdio locks it per call; line-buffered, so
+  // each row is one write). nullptr: no trace.
+  void set_trace(std::FILE* trace) { trace_ = trace; }
 
   // A session answers poses only once it is open: its force writer is created when its
   // contact-state writer has matched `recorders` readers (the recorders present, so that no
@@ -143,6 +151,7 @@ class Session {
   hapco_idl_FeedbackForce force_{};
   PoseStream stream_;  // flood bucket, order and jump checks (the fuzzed code, pose_intake.h)
   Eigen::Vector3d last_good_force_n_ = Eigen::Vector3d::Zero();
+  std::FILE* trace_ = nullptr;
   bool any_notice_ = false;   // an ignored-pose notice was sent (since start or reset)
   int64_t last_notice_ns_ = 0;  // its receive time, server clock
   SessionCounters counters_;

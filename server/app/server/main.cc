@@ -119,8 +119,9 @@ bool Parse(int argc, char** argv, Options* options) {
                     "SOLVER_TIME_BUDGET_EXCEEDED",
                     "Solver", 0, HUGE_VAL);
   command.AddText("--trace", &options->trace_path, "FILE",
-                  "write one CSV row per step (client_id, sequence, position, force sent, step time) for "
-                  "debugging and tests",
+                  "write one CSV row per stepped pose (client_id, sequence, position, force sent, step_us: "
+                  "from the pose's arrival to its force being ready), written before the force is "
+                  "published, for debugging and tests",
                   hapco::cli::kGroupOutput);
   command.AddRtPriority(&options->rt_priority, "the server thread");
   bool quiet = false;
@@ -184,8 +185,8 @@ int Run(const Options& options) {
   if (!options.trace_path.empty()) {
     trace.reset(std::fopen(options.trace_path.c_str(), "w"));
     if (!trace) throw hapco::InputError("cannot write " + options.trace_path);
-    // A line per stepped pose, written as it is made: a server killed mid-run (a host gone)
-    // leaves a trace of every pose it stepped.
+    // A line per stepped pose, written (by the thread that stepped it) before its force is
+    // published: a server killed mid-run (a host gone) leaves a trace of every force it sent.
     std::setvbuf(trace.get(), nullptr, _IOLBF, 1024);
     std::fprintf(trace.get(), "client_id,sequence,x_m,y_m,z_m,fx_n,fy_n,fz_n,step_us\n");
     server_options.trace = trace.get();

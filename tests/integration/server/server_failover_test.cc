@@ -377,8 +377,11 @@ TEST(ServerFailover, ThreeServersServeEachClientOnceAndTakeOverTheClientsOfOneTh
     }
   }
   EXPECT_EQ(gap_ns.size(), static_cast<std::size_t>(clients_of[killed]));
-  // The servers' own traces: no (client, pose) stepped by two servers (the killed server's
-  // trace may miss its last buffered rows, never hold a pose another server stepped).
+  // The servers' own traces: no (client, pose) stepped by two servers, and every force a
+  // client took was stepped by a server whose trace has it: a trace row is written before its
+  // force is published, so the killed server's trace holds every force it sent (it used to be
+  // written after a batch was published: a helper session found 8-27 forces of a killed
+  // server missing from its trace).
   std::map<std::pair<std::string, std::string>, std::string> stepped_by;
   for (const std::string& id : ids) {
     if (id != killed) {
@@ -390,6 +393,16 @@ TEST(ServerFailover, ThreeServersServeEachClientOnceAndTakeOverTheClientsOfOneTh
       auto [it, inserted] = stepped_by.emplace(std::make_pair(row.at("client_id"), row.at("sequence")), id);
       ASSERT_TRUE(inserted) << row.at("client_id") << " pose " << row.at("sequence") << " stepped by " << it->second
                             << " and " << id;
+    }
+  }
+  // (Every stepped force this test's reader saw, the killed server's last ones included.)
+  for (const auto& [client, s] : seen) {
+    EXPECT_GT(s.answered_by.size(), 1000u) << client;
+    for (const auto& [sequence, server] : s.answered_by) {
+      const auto it = stepped_by.find({client, std::to_string(sequence)});
+      ASSERT_NE(it, stepped_by.end()) << client << " pose " << sequence << ": its force came from " << server
+                                      << ", whose trace does not have it";
+      EXPECT_EQ(it->second, server) << client << " pose " << sequence;
     }
   }
   // The report tells each moved client's sessions apart: one on the killed server, then one on
