@@ -75,8 +75,8 @@ void ValidateSecurityIdentity(const SecurityIdentity& identity) {
     throw InputError("security: the certificate " + cert_path + " is not valid yet (check this machine's clock)");
   }
   if (X509_cmp_current_time(X509_get0_notAfter(certificate.get())) <= 0) {
-    throw InputError("security: the certificate " + cert_path + " has expired: make a new one (scripts/dds-security "
-                     "revoke " + identity.dir + " " + identity.name + ", then add-client)");
+    throw InputError("security: the certificate " + cert_path + " has expired: make a new one with "
+                     "scripts/dds-security renew " + identity.dir + " " + identity.name);
   }
   // Revoked (scripts/dds-security revoke): Cyclone reads the same CRL; say so before it does.
   const std::string crl_path = FileOf(identity, "public/crl.pem");

@@ -114,7 +114,7 @@ if [ $code -eq 2 ]; then ok "certificate of another CA: exit 2, no server seen"
 else bad "another CA: exit $code: $(tail -1 "$work/otherca.err")"; fi
 
 phantom carol "$work/expired" --security "$work/dep"; code=$?
-if [ $code -eq 1 ] && grep -q "carol/cert.pem has expired" "$work/expired.err"; then ok "expired (--security): $(cat "$work/expired.err")"
+if [ $code -eq 1 ] && grep -q "carol/cert.pem has expired: make a new one with scripts/dds-security renew" "$work/expired.err"; then ok "expired (--security): $(cat "$work/expired.err")"
 else bad "expired certificate: exit $code: $(cat "$work/expired.err")"; fi
 # The same certificate handed to DDS directly (no HapCo check first): DDS refuses it too.
 CYCLONEDDS_URI="file://$loopback,file://$work/dep/carol/security.xml" phantom carol "$work/expired-dds"; code=$?
@@ -141,6 +141,13 @@ else bad "bob got no forces: $(tail -2 "$work/bob.err")"; fi
 if phantom dave "$work/dave" --security "$work/dep" && grep -q "forces received" "$work/dave.out"; then
   ok "dave, added while the server runs: $(grep -o '[0-9]* forces received' "$work/dave.out")"
 else bad "dave (added live) got no forces: $(tail -2 "$work/dave.err")"; fi
+
+# The expired identity renewed under its own name (the client id is the identity: revoke +
+# add-client refuses a taken name) connects at once: the running server trusts the same CA.
+"$scripts/dds-security" renew "$work/dep" carol >"$work/renew.log" 2>&1 || bad "renew carol failed: $(cat "$work/renew.log")"
+if phantom carol "$work/carol-renewed" --security "$work/dep" && grep -q "forces received" "$work/carol-renewed.out"; then
+  ok "carol, expired then renewed: $(grep -o '[0-9]* forces received' "$work/carol-renewed.out")"
+else bad "carol (renewed) got no forces: $(tail -2 "$work/carol-renewed.err")"; fi
 
 # hapco-loadtest: its clients share one load-tester identity (add-load-tester).
 "$scripts/dds-security" add-load-tester "$work/dep" lt >/dev/null || bad "add-load-tester failed"
@@ -173,6 +180,9 @@ check_refused nobody "$work/dep" "no identity 'nobody'" "an unknown client id"
 "$bin/hapco-server" "$scene" --domain "$domain" --security "$work/dep" >"$work/server2.out" 2>"$work/server2.err" &
 server=$!
 check_refused bob "$work/dep" "'bob' was revoked" "revoked bob (--security)"
+if ! "$scripts/dds-security" renew "$work/dep" bob >"$work/renew-bob.log" 2>&1 && grep -q "bob was revoked" "$work/renew-bob.log"; then
+  ok "a revoked identity is not renewed: $(cat "$work/renew-bob.log")"
+else bad "revoked bob renewed: $(cat "$work/renew-bob.log")"; fi
 CYCLONEDDS_URI="file://$loopback,file://$work/dep/bob/security.xml" phantom bob "$work/revoked-dds"; code=$?
 if [ $code -ne 0 ] && ! grep -q "forces received" "$work/revoked-dds.out"; then ok "revoked bob (DDS, CRL): exit $code, no force"
 else bad "revoked bob still served by DDS: exit $code"; fi
@@ -180,8 +190,8 @@ if phantom alice "$work/alice2" --security "$work/dep" && grep -q "forces receiv
   ok "alice after the revocation: $(grep -o '[0-9]* forces received' "$work/alice2.out")"
 else bad "alice after the revocation: $(tail -2 "$work/alice2.err")"; fi
 served=$(tail -n +2 "$work/trace.csv" | cut -d, -f1 | sort -u | tr '\n' ' ')
-if grep -q "5 sessions opened" "$work/server.out" && [ "$served" = "alice bob dave lt-1 lt-2 " ]; then
-  ok "server: 5 sessions opened, stepped only alice, bob, dave, lt-1, lt-2 (none of the refused participants)"
+if grep -q "6 sessions opened" "$work/server.out" && [ "$served" = "alice bob carol dave lt-1 lt-2 " ]; then
+  ok "server: 6 sessions opened, stepped only alice, bob, carol (renewed), dave, lt-1, lt-2 (none of the refused participants)"
 else
   bad "server sessions: $(grep -o '[0-9]* sessions opened' "$work/server.out"), stepped: $served"
 fi
