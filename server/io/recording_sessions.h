@@ -23,6 +23,9 @@ struct RecordedSession {
   std::uint64_t first_step = 0, last_step = 0;
   long steps = 0;             // step records of this session in the file
   std::uint64_t missing = 0;  // steps of the server's counter between first and last not in the file
+  // Steps 1..first_step-1 of the counter, made before the first one in the file (the recorder
+  // started, or the client joined its server's recording, after them).
+  std::uint64_t before_first() const { return first_step > 1 ? first_step - 1 : 0; }
   bool last_force_only = false;  // the record of last_step was written from a force alone
 };
 

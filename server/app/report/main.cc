@@ -116,15 +116,22 @@ int Run(const Options& options) {
     const ClientSummary& c = clients[id];
     std::string sessions;
     unsigned long long gaps = 0;  // steps the servers made that are not in the file
+    unsigned long long before = 0;  // of them, steps before the session's first recorded one
     for (const hapco::io::RecordedSession& s : c.sessions.sessions()) {
       sessions += (sessions.empty() ? "" : ", ") + std::to_string(s.first_step) + ".." + std::to_string(s.last_step);
       if (!s.server_id.empty()) sessions += " on " + s.server_id;
       gaps += s.missing;
+      // A session counts its steps from 1: the recorder counts those before its first recorded
+      // step as missing too (it started after them).
+      before += s.before_first();
     }
     const std::size_t count = c.sessions.sessions().size();
-    std::printf("client     %s: %ld steps in %zu session%s (%s), %llu not in the file, %ld without contacts "
+    std::string before_text;
+    if (before > 0) before_text = " (" + std::to_string(before) + " of them before the recording began)";
+    std::printf("client     %s: %ld steps in %zu session%s (%s), %llu not in the file%s, %ld without contacts "
                 "(frame lost)\n",
-                id.c_str(), c.steps, count, count == 1 ? "" : "s", sessions.c_str(), gaps, c.without_contacts);
+                id.c_str(), c.steps, count, count == 1 ? "" : "s", sessions.c_str(), gaps + before, before_text.c_str(),
+                c.without_contacts);
   }
   // Offline recordings time every step; online ones carry the server's pose-in -> force-out.
   if (!step_times.empty() && percentile(step_times, 1.0) > 0) {

@@ -37,6 +37,16 @@ std::string Listing(const std::vector<RecordedSession>& sessions) {
   return out;
 }
 
+// A recorder started 1.7 s into a session has its steps from 1712 on: the 1711 before are
+// not in the file (the recorder counted them missing; the report said 0 not in the file).
+TEST(RecordingSessions, StepsBeforeASessionsFirstRecordedOneAreCounted) {
+  const std::vector<RecordedSession> late = SessionsOf({{"a", 1712}, {"a", 1713}, {"b", 1}, {"b", 2}, {"c", 5}});
+  ASSERT_EQ(late.size(), 3u) << Listing(late);
+  EXPECT_EQ(late[0].before_first(), 1711u);
+  EXPECT_EQ(late[1].before_first(), 0u);
+  EXPECT_EQ(late[2].before_first(), 4u);
+}
+
 TEST(RecordingSessions, OneServerWithAGapIsOneSession) {
   EXPECT_EQ(Listing(SessionsOf({{"a", 1}, {"a", 2}, {"a", 5}, {"a", 6}})), "1..6 on a (4, 2 missing)");
 }
