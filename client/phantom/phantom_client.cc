@@ -276,13 +276,39 @@ bool PhantomClient::Connect(std::string* why, const std::function<void(const std
     if (why != nullptr) {
       char seconds[32];
       std::snprintf(seconds, sizeof seconds, "%g", config_.connect_timeout_s);
-      *why = "the server did not open a session for '" + config_.client_id + "' within " + seconds +
-             " s (server full, or it does not serve scene '" +
-             config_.scene_name + "'? see its log)";
+      *why = "the server did not open a session for '" + config_.client_id + "' within " + seconds + " s (" +
+             WhyNoSession() + ")";
     }
     return false;
   }
   return true;
+}
+
+std::string PhantomClient::WhyNoSession() {
+  // What the servers announced (ServerStatus): name the one asked for when it is not among
+  // them, else the ones that are full or do not serve the scene. (It said "server full, or it
+  // does not serve scene ...?" even when --server-id named no server at all.)
+  std::lock_guard<std::mutex> lock(dds_->servers_mutex);
+  std::string heard, full, other_scene;
+  bool asked_for_is_there = false;
+  for (const service::ServerAnnouncement& s : dds_->servers) {
+    heard += (heard.empty() ? "" : ", ") + s.server_id;
+    asked_for_is_there = asked_for_is_there || s.server_id == config_.server_id;
+    if (s.max_sessions > 0 && s.sessions >= s.max_sessions) full += (full.empty() ? "" : ", ") + s.server_id;
+    if (!s.scenes.empty() && std::find(s.scenes.begin(), s.scenes.end(), config_.scene_name) == s.scenes.end()) {
+      other_scene += (other_scene.empty() ? "" : ", ") + s.server_id;
+    }
+  }
+  if (!config_.server_id.empty() && !asked_for_is_there) {
+    return "no server '" + config_.server_id + "' announced itself; " +
+           (heard.empty() ? std::string("no server did") : "servers heard: " + heard) +
+           " (--server-id names one of them, or leave it out to take the least loaded)";
+  }
+  std::string reason;
+  if (!full.empty()) reason += "full: " + full;
+  if (!other_scene.empty()) reason += (reason.empty() ? "" : "; ") + ("not serving scene '" + config_.scene_name + "': " + other_scene);
+  if (reason.empty()) reason = "server full, or it does not serve scene '" + config_.scene_name + "'? see its log";
+  return reason;
 }
 
 std::string PhantomClient::ChooseServer(const std::string& avoid) {

@@ -163,6 +163,8 @@ class PhantomClient {
   uint64_t newest_arrival_sequence_ = 0;  // receive thread only
   // The server for this client now (chosen from the announcements), "" for none known.
   std::string ChooseServer(const std::string& avoid);
+  // Why no server opened a session, from the servers' announcements (for Connect's message).
+  std::string WhyNoSession();
   // True while the DDS liveliness lease of `server_id`'s announcements has lapsed (the
   // process is gone or frozen; qos.h kServerLivelinessLeaseNs) and lapses can be trusted: no
   // server's lease has lapsed and come back within kLeaseDistrustNs. Locks the server list.

@@ -83,7 +83,7 @@ bool Parse(int argc, char** argv, Options* options) {
   command.AddSecurity(&security_dir, "DIR/server");
   options->server.server_id = hapco::service::DefaultServerId();
   command.AddText("--server-id", &options->server.server_id, "ID",
-                  "this server's name in ServerStatus, 1-64 of [A-Za-z0-9_.-] (default hapco-<hostname>-<pid>); "
+                  "this server's name in ServerStatus, 1-64 of [A-Za-z0-9_.-] (default hapco-<hostname>-<pid>-<random>, new at every start); "
                   "with several servers on a domain each client is served by the one it chose "
                   "(docs/several-servers.md)",
                   hapco::cli::kGroupDds);

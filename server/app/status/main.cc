@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstdio>
 #include <map>
+#include <set>
 #include <string>
 
 #include "cli/command_line.h"
@@ -64,6 +65,7 @@ int Run(const Options& o) {
   // others' for kOthersWindowS more (each announces itself at once when matched), one line each.
   constexpr double kOthersWindowS = 0.3;
   std::map<std::string, std::string> lines;  // server id -> its line
+  std::set<std::string> others;  // servers heard that --server-id left out
   dds_time_t deadline = dds_time() + Seconds(o.timeout_s);
   for (dds_time_t now = dds_time(); now < deadline; now = dds_time()) {
     reader.WaitForData(deadline - now);
@@ -71,7 +73,10 @@ int Run(const Options& o) {
     while (reader.Take(status.get(), &info)) {
       if (!info.valid_data) continue;
       const std::string id = svc::ServerIdOf(status->server_id);
-      if (!o.server_id.empty() && o.server_id != id) continue;
+      if (!o.server_id.empty() && o.server_id != id) {
+        others.insert(id);
+        continue;
+      }
       // source_timestamp is the server's wall clock: the age check assumes synchronised
       // clocks (same host in a HEALTHCHECK).
       const double age_s = static_cast<double>(dds_time() - info.source_timestamp) * 1e-9;
@@ -100,6 +105,13 @@ int Run(const Options& o) {
       for (const auto& [id, line] : lines) std::printf("%s\n", line.c_str());
     }
     return 0;
+  }
+  if (!others.empty()) {
+    std::string heard;
+    for (const std::string& id : others) heard += (heard.empty() ? "" : ", ") + id;
+    std::fprintf(stderr, "hapco-status: no%s status of server '%s' in domain %d within %.1f s; servers heard: %s\n",
+                 o.max_age_s > 0 ? " fresh" : "", o.server_id.c_str(), o.domain, o.timeout_s, heard.c_str());
+    return 1;
   }
   std::fprintf(stderr, "hapco-status: no%s server status in domain %d within %.1f s (check "
                "the server, --domain and CYCLONEDDS_URI peers)\n",

@@ -208,6 +208,23 @@ TEST(ServerFailover, AClientBeyondMaxSessionsIsRefusedWithAClearMessage) {
   EXPECT_EQ(second.Wait(60'000), 2);
   EXPECT_NE(ReadFile(dir + "/second.err").find("did not open a session for 'second'"), std::string::npos)
       << ReadFile(dir + "/second.err");
+  EXPECT_NE(ReadFile(dir + "/second.err").find("full: "), std::string::npos) << ReadFile(dir + "/second.err");
+  // A client asking for a server that does not exist is told so, with the servers heard (it was
+  // told "server full, or it does not serve scene ...?"); hapco-status likewise.
+  Process nope({HAPCO_PHANTOM_EXE, kScene, "--client-id", "third", "--domain", domain, "--connect-timeout-s", "3",
+                "--server-id", "nope"},
+               dir + "/nope.out", dir + "/nope.err");
+  EXPECT_EQ(nope.Wait(60'000), 2);
+  EXPECT_NE(ReadFile(dir + "/nope.err").find("no server 'nope' announced itself; servers heard: hapco-"),
+            std::string::npos)
+      << ReadFile(dir + "/nope.err");
+  Process status({HAPCO_STATUS_EXE, "--domain", domain, "--server-id", "nope", "--connect-timeout-s", "3"},
+                 dir + "/status.out", dir + "/status.err");
+  EXPECT_EQ(status.Wait(60'000), 1);
+  EXPECT_NE(ReadFile(dir + "/status.err").find("no status of server 'nope' in domain " + domain), std::string::npos)
+      << ReadFile(dir + "/status.err");
+  EXPECT_NE(ReadFile(dir + "/status.err").find("servers heard: hapco-"), std::string::npos)
+      << ReadFile(dir + "/status.err");
   first.Signal(SIGINT);  // a phantom stopped early leaves its session and exits 0
   EXPECT_EQ(first.Wait(30'000), 0) << ReadFile(dir + "/first.err");
   EXPECT_NE(ReadFile(dir + "/first.out").find("stopped by signal"), std::string::npos);
