@@ -93,6 +93,18 @@ class SceneChecker {
     spec.description = scene.description();
     if (!scene.has_obstacle()) Fail("", scene, tree_, "obstacle", "is missing");
     if (!scene.has_tool()) Fail("", scene, tree_, "tool", "is missing");
+    // Only the tool follows the device: a driven face or group on the obstacle was taken as one
+    // more clamp (the device's translation is never applied to it), so a press on that face met
+    // a rigid wall (45 N where 1.4 N was right, a helper session's scene).
+    if (scene.obstacle().driven_face() != pb::BOX_FACE_UNSPECIFIED) {
+      Fail("obstacle", scene.obstacle(), Nested(tree_, scene, "obstacle"), "driven_face",
+           "only the tool follows the haptic device; fix the obstacle's faces with `clamped_faces`");
+    }
+    if (scene.obstacle().has_mesh() && !scene.obstacle().mesh().driven_group().empty()) {
+      Fail("obstacle.mesh", scene.obstacle().mesh(),
+           Nested(Nested(tree_, scene, "obstacle"), scene.obstacle(), "mesh"), "driven_group",
+           "only the tool follows the haptic device; fix the obstacle's nodes with `clamped_groups`");
+    }
     spec.obstacle = CheckBody("obstacle", scene.obstacle(), Nested(tree_, scene, "obstacle"));
     // Before the body checks: without a driven face the tool would be reported as an
     // unsupported body ("no clamped and no driven face"), which hides the actual mistake.

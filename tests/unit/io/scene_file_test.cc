@@ -219,6 +219,15 @@ TEST(SceneFileTest, ToolWithNeitherDrivenNorClampedFaceIsToldItNeedsADrivenFaceA
   EXPECT_EQ(message.find("clamped_faces"), std::string::npos) << message;
 }
 
+// Only the tool follows the device: a driven face on the obstacle was taken as one more clamp
+// (a press on it met a rigid wall: 45 N where 1.4 N was right). Refused at its line.
+TEST(SceneFileTest, DrivenFaceOnTheObstacleIsRefused) {
+  const std::string message = ErrorOf(Benchmark1With("  clamped_faces: X_MAX\n", "  clamped_faces: X_MAX\n  driven_face: Z_MAX\n"));
+  EXPECT_NE(message.find("obstacle.driven_face: only the tool follows the haptic device"), std::string::npos) << message;
+  EXPECT_NE(message.find("scene.txtpb:" + std::to_string(LineOf("  clamped_faces: X_MAX") + 1) + ":"), std::string::npos)
+      << message;
+}
+
 // A missing `}` makes the next field land in the block left open; the parser's "Material has
 // no field named driven_face" now says that a `}` is probably missing.
 TEST(SceneFileTest, MissingClosingBraceIsNamedAsSuch) {
@@ -374,6 +383,9 @@ TEST_F(MeshSceneTest, BoxFacesOnAMeshBodyAndAToolWithoutDrivenGroupAreRefused) {
   EXPECT_NE(message.find("tool.mesh.driven_group: is missing"), std::string::npos) << message;
   message = OrganTipErrorWith("    clamped_groups: \"base\"\n", "");
   EXPECT_NE(message.find("obstacle.mesh.clamped_groups: the body has no clamped and no driven group"), std::string::npos)
+      << message;
+  message = OrganTipErrorWith("    clamped_groups: \"base\"\n", "    clamped_groups: \"base\"\n    driven_group: \"base\"\n");
+  EXPECT_NE(message.find("obstacle.mesh.driven_group: only the tool follows the haptic device"), std::string::npos)
       << message;
   message = OrganTipErrorWith("file: \"meshes/organ.geo\"\n    length_unit_m: 0.001", "file: \"meshes/organ.geo\"");
   EXPECT_NE(message.find("obstacle.mesh.length_unit_m: must be the metres per length unit"), std::string::npos) << message;
