@@ -284,10 +284,20 @@ bool OnContactSurface(const BodySpec& body, const fem::SurfaceTriangle& triangle
 
 }  // namespace
 
+namespace {
+bool AllCornersClamped(const BodySpec& body, const fem::SurfaceTriangle& triangle) {
+  if (body.mesh == nullptr) return false;
+  const std::vector<int>& nodes = body.mesh->clamped_nodes;
+  return std::all_of(triangle.corners.begin(), triangle.corners.end(),
+                     [&](int corner) { return std::binary_search(nodes.begin(), nodes.end(), corner); });
+}
+}  // namespace
+
 struct TwoBodyModel::Parts {
   SceneSpec scene;
   std::vector<fem::SurfaceTriangle> obstacle_faces, tool_faces;
   fem::ElasticBody obstacle, tool;
+  int obstacle_faces_in_reach = 0;  // obstacle boundary faces within reach, contact or not
   int obstacle_range_axis = -1;  // banded obstacle compliance: its axis and range, m
   double obstacle_range_m = 0.0;
   bool range_automatic = false;
@@ -354,15 +364,20 @@ TwoBodyModel::Parts TwoBodyModel::MakeParts(SceneSpec scene, std::size_t max_ope
   const Eigen::Vector3d reach_min = tool_mesh.nodes_m.colwise().minCoeff().transpose().array() - margin_m;
   const Eigen::Vector3d reach_max = tool_mesh.nodes_m.colwise().maxCoeff().transpose().array() + margin_m;
   std::vector<fem::SurfaceTriangle> reachable;
+  int in_reach = 0;
   for (const fem::SurfaceTriangle& triangle : fem::BoundaryTriangles(obstacle_mesh)) {
     Eigen::Vector3d lo = Position(obstacle_mesh, triangle.corners[0]), hi = lo;
     for (int corner : triangle.corners) {
       lo = lo.cwiseMin(Position(obstacle_mesh, corner));
       hi = hi.cwiseMax(Position(obstacle_mesh, corner));
     }
-    if ((hi.array() >= reach_min.array()).all() && (lo.array() <= reach_max.array()).all() &&
-        OnContactSurface(scene.obstacle, triangle)) {
-      reachable.push_back(triangle);
+    if ((hi.array() >= reach_min.array()).all() && (lo.array() <= reach_max.array()).all()) {
+      if (OnContactSurface(scene.obstacle, triangle)) {
+        reachable.push_back(triangle);
+        ++in_reach;
+      } else if (!AllCornersClamped(scene.obstacle, triangle)) {
+        ++in_reach;  // (a clamped face rests on its support: the tool cannot press it)
+      }
     }
   }
   if (reachable.empty()) {
@@ -421,6 +436,7 @@ TwoBodyModel::Parts TwoBodyModel::MakeParts(SceneSpec scene, std::size_t max_ope
   fem::ElasticBody obstacle = BuildBody(scene.obstacle, std::move(obstacle_mesh), std::move(obstacle_candidates));
   fem::ElasticBody tool = BuildBody(scene.tool, std::move(tool_mesh), std::move(tool_candidates));
   Parts parts{std::move(scene), std::move(reachable), std::move(tool_faces), std::move(obstacle), std::move(tool)};
+  parts.obstacle_faces_in_reach = in_reach;
   parts.obstacle_range_axis = axis;
   parts.obstacle_range_m = range_m;
   parts.range_automatic = automatic;
@@ -439,6 +455,8 @@ TwoBodyModel::TwoBodyModel(Parts parts)
   const fem::Mesh& tool_mesh = tool_.mesh();
   obstacle_thickness_m_ = SmallestExtent(obstacle_mesh);
   tool_thickness_m_ = SmallestExtent(tool_mesh);
+  stats_.faces_in_reach = parts.obstacle_faces_in_reach;
+  stats_.faces_in_reach_without_contact = parts.obstacle_faces_in_reach - static_cast<int>(parts.obstacle_faces.size());
   obstacle_surface_ = DescribeSurface(obstacle_mesh, std::move(parts.obstacle_faces), scene_.quadratic_face_subtriangles,
                                       parts.obstacle_range_axis);
   obstacle_surface_.range_axis = parts.obstacle_range_axis;
@@ -543,6 +561,26 @@ std::string StartingPositionNote(const TwoBodyModel& model) {
   std::ostringstream note;
   note << "the tool starts " << model.initial_gap_m() * 1e3
        << " mm from the obstacle: no force until the device has travelled that far";
+  return note.str();
+}
+
+std::string ContactGroupsNote(const TwoBodyModel& model) {
+  const TwoBodyModelStats& stats = model.stats();
+  if (stats.faces_in_reach_without_contact <= 0) return "";
+  const auto& surface = model.obstacle_surface();
+  Eigen::Vector3d lo = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+  for (const fem::SurfaceTriangle& t : surface.triangles) {
+    for (int corner : t.corners) {
+      lo = lo.cwiseMin(Position(model.obstacle().mesh(), corner));
+      hi = hi.cwiseMax(Position(model.obstacle().mesh(), corner));
+    }
+  }
+  std::ostringstream note;
+  note << "obstacle.mesh.contact_groups leave " << stats.faces_in_reach_without_contact << " of the obstacle's "
+       << stats.faces_in_reach << " boundary faces within reach without contact: a tool pressed there passes "
+       << "through them with no force. The contact faces lie within x " << lo.x() * 1e3 << ".." << hi.x() * 1e3
+       << ", y " << lo.y() * 1e3 << ".." << hi.y() * 1e3 << ", z " << lo.z() * 1e3 << ".." << hi.z() * 1e3
+       << " mm (name more groups in contact_groups, or leave it out for the whole boundary)";
   return note.str();
 }
 

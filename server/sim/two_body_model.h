@@ -82,6 +82,9 @@ struct TwoBodyModelStats {
   // Whether the obstacle's compliance range was chosen because its dense blocks did not fit
   // (SceneSpec::compliance_range_m = 0).
   bool range_chosen_automatically = false;
+  // Obstacle boundary faces within the tool's reach that the scene's contact_groups leave out
+  // (a tool pressed there meets no contact and passes through them), of all within reach.
+  int faces_in_reach = 0, faces_in_reach_without_contact = 0;
 };
 
 class TwoBodyModel {
@@ -168,5 +171,11 @@ class TwoBodyModel {
 // A note for the user when the tool does not touch the obstacle at the start (its gap exceeds
 // the activation gap): how far, so "no force yet" is not mistaken for a fault. Empty otherwise.
 std::string StartingPositionNote(const TwoBodyModel& model);
+
+// "" when every obstacle face within reach can hold a contact; else a note that the scene's
+// contact_groups leave some out and where the contact faces are: a tool that slides off them
+// sinks into the obstacle with no force (a helper session's Hertz scene, slid 8 mm off its
+// 4 mm contact disc: 0 N while 0.3 mm deep).
+std::string ContactGroupsNote(const TwoBodyModel& model);
 
 }  // namespace hapco::sim

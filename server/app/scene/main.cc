@@ -166,8 +166,9 @@ int Run(const Options& options) {
     std::printf("          the step reads them with the %s compliance kernels (this CPU's fastest; "
                 "sim/compliance_kernels.h)\n",
                 hapco::sim::ComplianceKernelName(hapco::sim::FastestComplianceKernel()));
-    const std::string note = hapco::sim::StartingPositionNote(model);
-    if (!note.empty()) std::printf("note      %s\n", note.c_str());
+    for (const std::string& note : {hapco::sim::StartingPositionNote(model), hapco::sim::ContactGroupsNote(model)}) {
+      if (!note.empty()) std::printf("note      %s\n", note.c_str());
+    }
   }
   std::printf("contact   mu = %.3g, activation gap %.3g mm; solver %s, tolerance %.3g m\n",
               scene.friction_coefficient, scene.activation_gap_m * 1e3,

@@ -173,8 +173,9 @@ int Run(const Options& options) {
                   stats.compliance_seconds);
       std::fflush(stdout);
     }
-    if (const std::string note = hapco::sim::StartingPositionNote(*models.back()); !note.empty()) {
-      std::printf("hapco-server: scene %s: note: %s\n", models.back()->scene().name.c_str(), note.c_str());
+    for (const std::string& note :
+         {hapco::sim::StartingPositionNote(*models.back()), hapco::sim::ContactGroupsNote(*models.back())}) {
+      if (!note.empty()) std::printf("hapco-server: scene %s: note: %s\n", models.back()->scene().name.c_str(), note.c_str());
     }
     scenes_line += (scenes_line.empty() ? "" : ", ") + models.back()->scene().name + " (" +
                    std::to_string(models.back()->tool_candidates().size()) + " tool + " +

@@ -283,8 +283,8 @@ int Run(const Options& options) {
               model.obstacle_candidates().size(), model.tool_candidates().size(), setup.ElapsedSeconds(),
               model_stats.build_seconds, model_stats.compliance_seconds,
               static_cast<double>(model_stats.operator_bytes) / (1 << 20));
-  if (const std::string note = hapco::sim::StartingPositionNote(model); !note.empty()) {
-    std::printf("note: %s\n", note.c_str());
+  for (const std::string& note : {hapco::sim::StartingPositionNote(model), hapco::sim::ContactGroupsNote(model)}) {
+    if (!note.empty()) std::printf("note: %s\n", note.c_str());
   }
   hapco::sim::TwoBodySession session(
       model, options.compliance == "full" ? hapco::sim::SolveMode::kFullSolve : hapco::sim::SolveMode::kPrecomputed);

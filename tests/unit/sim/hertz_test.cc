@@ -114,5 +114,21 @@ TEST_F(HertzTest, ForceConvergesFromAboveTowardsHertzWithTheExponentThreeHalves)
   RecordProperty("tet4_error_5.66mm", std::to_string(finer.error_at_0_2mm));
 }
 
+// The Hertz block's contact_groups keep only a disc of radius 4 mm around the press: a tool
+// slid off it sinks into the block with no force (a helper session slid the sphere 8 mm: 0 N
+// while 0.3 mm deep). The scene says so when it loads; a scene whose contact faces are the whole
+// boundary (benchmark 1, no contact_groups) gets no such note.
+TEST_F(HertzTest, ContactGroupsThatLeaveFacesInReachOutAreNoted) {
+  const TwoBodyModel model(HertzScene("8"));
+  const std::string note = ContactGroupsNote(model);
+  EXPECT_NE(note.find("obstacle.mesh.contact_groups leave "), std::string::npos) << note;
+  EXPECT_NE(note.find("x -4..4, y -4..4"), std::string::npos) << note;
+  EXPECT_GT(model.stats().faces_in_reach_without_contact, 0);
+  EXPECT_LT(model.stats().faces_in_reach_without_contact, model.stats().faces_in_reach);
+  const TwoBodyModel bar(io::LoadSceneFile(std::string(HAPCO_SOURCE_DIR) + "/tests/data/scenes/coarse.txtpb"));
+  EXPECT_EQ(ContactGroupsNote(bar), "");
+  EXPECT_EQ(bar.stats().faces_in_reach_without_contact, 0);
+}
+
 }  // namespace
 }  // namespace hapco::sim
