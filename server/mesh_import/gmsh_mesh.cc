@@ -415,7 +415,10 @@ ImportedMesh ImportMeshWithGmsh(const MeshRequest& request, GmshSession* session
   for (const auto& [tag, node] : tag_to_node) {
     const std::size_t g = static_cast<std::size_t>(tag_to_gmsh_index.at(tag));
     for (int a = 0; a < 3; ++a) {
-      mesh.nodes_m(node, a) = coordinates[3 * g + static_cast<std::size_t>(a)] * request.length_unit_m + request.offset_m[a];
+      const double x = coordinates[3 * g + static_cast<std::size_t>(a)];
+      // (A NaN made its tetrahedra "degenerate (zero volume)": name the node instead.)
+      if (!std::isfinite(x)) Fail(path, "node " + std::to_string(tag) + " has a non-finite coordinate (" + std::to_string(x) + ")");
+      mesh.nodes_m(node, a) = x * request.length_unit_m + request.offset_m[a];
     }
   }
   const std::vector<int> gmsh_local = GmshToFemOrder(wanted_type, request.order);

@@ -251,6 +251,10 @@ TEST_F(GmshMeshTest, InvertedAndDegenerateTetrahedraAreNamedByTheirTag) {
   flat_text.replace(flat_text.find("4 0 0 1"), 7, "4 1 1 0");  // node 4 in the plane of 1, 2, 3
   const std::string degenerate = ExpectRefused(Request(Write("flat.msh", flat_text), fem::ElementOrder::kTet4, 0));
   EXPECT_NE(degenerate.find("tetrahedron 7 is degenerate"), std::string::npos) << degenerate;
+  std::string nan_text = OneTetrahedron("1 2 3 4");
+  nan_text.replace(nan_text.find("4 0 0 1"), 7, "4 0 nan 1");
+  const std::string nan = ExpectRefused(Request(Write("nan.msh", nan_text), fem::ElementOrder::kTet4, 0));
+  EXPECT_NE(nan.find("node 4 has a non-finite coordinate"), std::string::npos) << nan;
 }
 
 TEST_F(GmshMeshTest, MemoryEstimateOfAMeshBodyIsNotBelowWhatCholmodFactors) {
