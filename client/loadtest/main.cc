@@ -92,12 +92,12 @@ bool Parse(int argc, char** argv, Options* o) {
                       "add-load-tester DIR PREFIX)");
   command.AddText("--client-prefix", &o->prefix, "P", "client ids P-1..P-N (default lt)", hapco::cli::kGroupDds);
   command.AddConnectTimeout(&o->connect_timeout_s, "wait at most S s for the server (default 30)");
-  command.AddText("--csv-dir", &o->csv_dir, "DIR",
+  command.AddOutputDirectory("--csv-dir", &o->csv_dir, "DIR",
                   "write DIR/summary.csv (one row per client + \"all\"), DIR/ticks-ID.csv (one row per tick), "
                   "DIR/roundtrip.csv (every force's round trip)",
                   hapco::cli::kGroupOutput);
   std::string plots_dir;
-  CLI::Option* plots = command.AddText("--plots", &plots_dir, "DIR",
+  CLI::Option* plots = command.AddOutputDirectory("--plots", &plots_dir, "DIR",
                                        "write the CSVs (those of --csv-dir) and their charts "
                                        "(roundtrip-cdf.png, forces.png) to DIR, via scripts/plot_loadtest.py "
                                        "(needs /usr/bin/python3 with matplotlib)",

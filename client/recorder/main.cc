@@ -75,7 +75,7 @@ bool Parse(int argc, char** argv, Options* o) {
   command.AddOutput(&o->output, "recording to write, created or truncated (required)");
   command.AddDomain(&o->domain);
   command.AddSecurity(&o->security_dir, "DIR/recorder");
-  command.AddText("--ready-file", &o->ready_file, "FILE",
+  command.AddOutputFile("--ready-file", &o->ready_file, "FILE",
                   "create FILE once the recorder is ready: it has seen the server and matched its contact-state "
                   "writers, so every session opened from then on is recorded from its first step (a readiness "
                   "check for containers: docker/compose.yaml)",

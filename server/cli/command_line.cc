@@ -1,10 +1,14 @@
 #include "cli/command_line.h"
 
+#include <unistd.h>
+
+
 #include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <filesystem>
 #include <sstream>
 
 #include "cli/run_main.h"
@@ -170,7 +174,16 @@ CLI::Option* CommandLine::AddInteger(const std::string& name, int* value, const 
 CLI::Option* CommandLine::AddText(const std::string& name, std::string* value, const std::string& metavar,
                                   const std::string& help, const std::string& group) {
   metavars_[name] = metavar;
-  return app_.add_option(name, *value, help)->group(group);
+  // An empty value was taken as the option left out by some tools (--csv "": no CSV, exit 0)
+  // and refused by others: one rule for all.
+  const std::string flag = name;
+  CLI::Validator not_empty(
+      [flag](std::string& text) -> std::string {
+        if (text.empty()) throw InputError(flag + " needs a value (leave the option out for its default)");
+        return "";
+      },
+      "");
+  return app_.add_option(name, *value, help)->check(not_empty)->group(group);
 }
 
 CLI::Option* CommandLine::AddChoice(const std::string& name, std::string* value, std::vector<std::string> choices,
@@ -217,13 +230,70 @@ CLI::Option* CommandLine::AddQuiet(bool* quiet, const std::string& what) {
   return AddFlag("--quiet", quiet, what, kGroupGeneral);
 }
 
+CLI::Validator OutputFileCheck(const std::string& flag) {
+  // Checked when the command line is read, not when the run ends: a directory or a folder that
+  // does not exist was found only after the whole run (hapco-sim --output DIR: the run, then
+  // "cannot move ...partial", the recording left under another name).
+  return CLI::Validator(
+      [flag](std::string& text) -> std::string {
+        if (text.empty()) throw InputError(flag + " needs a file name (leave the option out for no file)");
+        std::error_code error;
+        const std::filesystem::path path(text);
+        if (std::filesystem::is_directory(path, error)) throw InputError(flag + ": " + text + " is a directory");
+        if (std::filesystem::exists(path, error) && access(path.c_str(), W_OK) == 0) return "";  // (also /dev/null)
+        const std::filesystem::path parent = path.has_parent_path() ? path.parent_path() : std::filesystem::path(".");
+        if (!std::filesystem::is_directory(parent, error)) {
+          throw InputError(flag + ": the folder " + parent.string() + " of " + text + " does not exist");
+        }
+        if (access(parent.c_str(), W_OK) != 0) {
+          throw InputError(flag + ": the folder " + parent.string() + " of " + text + " is not writable");
+        }
+        return "";
+      },
+      "");
+}
+
+CLI::Validator OutputDirectoryCheck(const std::string& flag) {
+  // A folder to write into, created if missing: it, or the nearest folder above it that
+  // exists, must be a writable directory (checked before any work, as for files).
+  return CLI::Validator(
+      [flag](std::string& text) -> std::string {
+        if (text.empty()) throw InputError(flag + " needs a folder name (leave the option out for none)");
+        std::error_code error;
+        std::filesystem::path path = std::filesystem::absolute(text, error);
+        if (error) throw InputError(flag + ": " + text + ": " + error.message());
+        while (!std::filesystem::exists(path, error) && path.has_parent_path() && path != path.parent_path()) {
+          path = path.parent_path();
+        }
+        if (!std::filesystem::is_directory(path, error)) {
+          throw InputError(flag + ": " + path.string() + " is not a folder (the output folder " + text +
+                           " cannot be made there)");
+        }
+        if (access(path.c_str(), W_OK) != 0) throw InputError(flag + ": " + path.string() + " is not writable");
+        return "";
+      },
+      "");
+}
+
+CLI::Option* CommandLine::AddOutputDirectory(const std::string& name, std::string* path, const std::string& metavar,
+                                             const std::string& help, const std::string& group) {
+  metavars_[name] = metavar;
+  return app_.add_option(name, *path, help)->check(OutputDirectoryCheck(name))->group(group);
+}
+
+CLI::Option* CommandLine::AddOutputFile(const std::string& name, std::string* path, const std::string& metavar,
+                                        const std::string& help, const std::string& group) {
+  metavars_[name] = metavar;
+  return app_.add_option(name, *path, help)->check(OutputFileCheck(name))->group(group);
+}
+
 CLI::Option* CommandLine::AddOutput(std::string* path, const std::string& help) {
   metavars_["--output"] = "FILE";
-  return app_.add_option("-o,--output", *path, help)->group(kGroupOutput);
+  return app_.add_option("-o,--output", *path, help)->check(OutputFileCheck("--output"))->group(kGroupOutput);
 }
 
 CLI::Option* CommandLine::AddCsv(std::string* path, const std::string& help) {
-  return AddText("--csv", path, "FILE", help, kGroupOutput);
+  return AddOutputFile("--csv", path, "FILE", help, kGroupOutput);
 }
 
 CLI::Option* CommandLine::AddSolver(std::string* name, const std::string& default_help) {
@@ -279,11 +349,19 @@ void CommandLine::AddRendering(std::string* mode, double* max_model_stiffness_n_
 }
 
 CLI::Option* CommandLine::AddDuration(double* seconds, const std::string& help) {
-  return AddNumber("--duration-s", seconds, "S", help, "Run", 0, HUGE_VAL, true);
+  // At most 10^6 s (11.6 days): a tick count of 1 kHz runs fits an int32 (2.2e6 s overflowed
+  // it: "the number of ticks must be positive"; 1e10 s made the recorder stop at once).
+  return AddNumber("--duration-s", seconds, "S", help, "Run", 0, kMaxDurationS, true);
 }
 
 CLI::Option* CommandLine::AddSecurity(std::string* dir, const std::string& who) {
   metavars_["--security"] = "DIR";
+  const CLI::Validator not_empty(
+      [](std::string& text) -> std::string {
+        if (text.empty()) throw InputError("--security needs the deployment's folder (leave it out for no security)");
+        return "";
+      },
+      "");
   return app_.add_option("--security", *dir,
                          "secured DDS (authentication, access control, encryption) with the deployment made by "
                          "scripts/dds-security init DIR; this tool runs as " + who + " (docs/security.md)")

@@ -47,8 +47,17 @@ class CommandLine {
                          double maximum, bool open_minimum = false);
   CLI::Option* AddInteger(const std::string& name, int* value, const std::string& metavar,
                           const std::string& help, const std::string& group, long minimum, long maximum);
+  // Any text but "" (an empty value is refused: leave the option out instead).
   CLI::Option* AddText(const std::string& name, std::string* value, const std::string& metavar,
                        const std::string& help, const std::string& group);
+  // A file to write: not empty, not a directory, in an existing writable folder (checked when
+  // the command line is read, before any work).
+  CLI::Option* AddOutputFile(const std::string& name, std::string* path, const std::string& metavar,
+                             const std::string& help, const std::string& group);
+  // A folder to write into, created if missing: it, or the nearest existing folder above it,
+  // must be a writable directory (checked when the command line is read).
+  CLI::Option* AddOutputDirectory(const std::string& name, std::string* path, const std::string& metavar,
+                                  const std::string& help, const std::string& group);
   // One of `choices` (the help's metavar lists them when it is empty).
   CLI::Option* AddChoice(const std::string& name, std::string* value, std::vector<std::string> choices,
                          const std::string& help, const std::string& group);
@@ -83,6 +92,7 @@ class CommandLine {
   // (client/phantom/force_renderer.h, docs/network-haptics.md), group Device.
   void AddRendering(std::string* mode, double* max_model_stiffness_n_per_m);
   // --duration-s S: how long the tool runs.
+  static constexpr double kMaxDurationS = 1e6;
   CLI::Option* AddDuration(double* seconds, const std::string& help);
   // --security DIR: run secured with the deployment of scripts/dds-security init DIR; `who`
   // says which identity the tool takes (DIR/server, DIR/<client id>, ...).

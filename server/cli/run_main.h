@@ -6,8 +6,9 @@
 
 namespace hapco::cli {
 
-// Runs `body` and returns its exit code; an InputError prints "TOOL: message" on stderr and
-// returns 1, any other exception "TOOL: unexpected error: ..." and returns 3.
+// Runs `body` and returns its exit code; an InputError, a filesystem error (a path the user
+// gave) or running out of memory prints "TOOL: message" on stderr and returns 1, any other
+// exception "TOOL: unexpected error: ..." and returns 3.
 int RunMain(const char* tool, const std::function<int()>& body);
 
 // "TOOL HapCo 0.1.0 (git DESCRIBE)": the project version and the tree's `git describe` at

@@ -554,6 +554,9 @@ std::unique_ptr<sim::TwoBodyModel> MakeSceneModel(const sim::SceneSpec& scene, c
 }
 
 sim::SceneSpec LoadSceneFile(const std::string& path) {
+  // (A directory opens as an empty stream: it was reported as "format_version: is 0".)
+  std::error_code error;
+  if (std::filesystem::is_directory(path, error)) throw InputError(path + ": is a directory, not a scene file");
   std::ifstream file(path);
   if (!file) throw InputError(path + ": cannot open scene file");
   std::stringstream text;

@@ -36,7 +36,7 @@ bool Parse(int argc, char** argv, Options* options) {
   command.AddCsv(&options->csv_path,
                  "steps as CSV, one row per step of every client (client_id column; units in the header; "
                  "contacts_missing = 1: the step's frame was lost, written from its force alone)");
-  command.AddText("--plots", &options->plots_dir, "DIR",
+  command.AddOutputDirectory("--plots", &options->plots_dir, "DIR",
                   "write force.png, contact_states.png, round_trip.png to DIR (needs /usr/bin/python3 with "
                   "matplotlib; implies a CSV at DIR/steps.csv unless --csv is given)",
                   hapco::cli::kGroupOutput);

@@ -118,7 +118,7 @@ bool Parse(int argc, char** argv, Options* options) {
                     "solver.time_budget_s); a step out of time answers with the forces it has and status "
                     "SOLVER_TIME_BUDGET_EXCEEDED",
                     "Solver", 0, HUGE_VAL);
-  command.AddText("--trace", &options->trace_path, "FILE",
+  command.AddOutputFile("--trace", &options->trace_path, "FILE",
                   "write one CSV row per stepped pose (client_id, sequence, position, force sent, step_us: "
                   "from the pose's arrival to its force being ready), written before the force is "
                   "published, for debugging and tests",

@@ -16,6 +16,7 @@
 #include "cli/run_main.h"
 #include "common/error.h"
 #include "service/dds.h"
+#include "service/pose_intake.h"
 #include "service/qos.h"
 #include "service/server_choice.h"
 
@@ -47,7 +48,12 @@ bool Parse(int argc, char** argv, Options* o) {
                   "Checks");
   command.AddQuiet(&o->quiet, "print nothing on success");
   command.Deprecate("--timeout-s", "--connect-timeout-s");
-  return command.Parse(argc, argv);
+  const bool parsed = command.Parse(argc, argv);
+  // The rule hapco-server applies to its own id: an id it could never have is a typo.
+  if (parsed && !o->server_id.empty() && !hapco::service::IsValidClientId(o->server_id)) {
+    throw hapco::InputError("--server-id expects 1-64 of [A-Za-z0-9_.-], got '" + o->server_id + "'");
+  }
+  return parsed;
 }
 
 dds_duration_t Seconds(double s) { return static_cast<dds_duration_t>(s * 1e9); }

@@ -170,7 +170,7 @@ bool Parse(int argc, char** argv, Options* o) {
                   "the reference's obstacle divisions, Tet10 (default 30,6,6; 40,8,8 checks that one)", "Run");
   command.AddText("--reference-tool", &o->reference_tool, "NX,NY,NZ",
                   "the reference's tool divisions, Tet10 (default 6,6,3)", "Run");
-  command.AddText("--output", &o->out_dir, "DIR",
+  command.AddOutputDirectory("--output", &o->out_dir, "DIR",
                   "directory for the per-path CSVs and summary.csv, created if missing (default ./free-interaction)",
                   hapco::cli::kGroupOutput);
   command.Deprecate("--out", "--output");

@@ -168,7 +168,7 @@ bool Parse(int argc, char** argv, Options* options) {
   command.AddInteger("--repeats", &options->repeats, "N", "timed runs per K, interleaved (default 3)", "Run", 1,
                      1000);
   command.AddCsv(&options->csv, "one row per pose and K: k, pose, source, force, reference force");
-  command.AddText("--summary", &options->summary, "FILE",
+  command.AddOutputFile("--summary", &options->summary, "FILE",
                   "append one row per K to FILE (header written when the file is new): path, spacing, distance, K, "
                   "shares, errors, time ratio",
                   hapco::cli::kGroupOutput);

@@ -187,7 +187,7 @@ bool Parse(int argc, char** argv, Options* o) {
                   "Device");
   command.AddFlag("--no-surface-ahead", &o->no_surface_ahead, "ignore the surface ahead (the contact plane and the device's friction kept)",
                   "Device");
-  command.AddText("--output", &o->out_dir, "DIR", "runs directory (default ./network-haptics-offline)",
+  command.AddOutputDirectory("--output", &o->out_dir, "DIR", "runs directory (default ./network-haptics-offline)",
                   cli::kGroupOutput);
   return command.Parse(argc, argv);
 }

@@ -697,7 +697,7 @@ bool Parse(int argc, char** argv, Options* o) {
                   "directory holding benchmark1.txtpb and benchmark2.txtpb (default: proto/scenes of the "
                   "source tree)",
                   "Run");
-  command.AddText("--output", &o->out_dir, "DIR", "directory for the CSVs, created if missing (required)",
+  command.AddOutputDirectory("--output", &o->out_dir, "DIR", "directory for the CSVs, created if missing (required)",
                   hapco::cli::kGroupOutput);
   command.Deprecate("--out", "--output");
   if (!command.Parse(argc, argv)) return false;

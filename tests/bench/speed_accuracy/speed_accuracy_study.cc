@@ -295,7 +295,7 @@ bool Parse(int argc, char** argv, Options* options) {
                   "proto/scenes/benchmark1.txtpb of the source tree)")
       ->group("Arguments");
   command.AddFlag("--quick", &options->quick, "two models, two solvers, two tolerances: a smoke run (ctest)", "Run");
-  command.AddText("--output", &options->out, "DIR",
+  command.AddOutputDirectory("--output", &options->out, "DIR",
                   "directory for runs.csv, models.csv and forces.csv, created if missing (default ./speed_accuracy)",
                   hapco::cli::kGroupOutput);
   command.Deprecate("--out", "--output");

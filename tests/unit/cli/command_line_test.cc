@@ -67,7 +67,9 @@ TEST(CommandLineTest, BadInputNamesTheOptionAndTheRange) {
   EXPECT_EQ(ErrorOf({"s", "--steps", "3.5"}), "--steps expects an integer in [1, 100], got '3.5'");
   EXPECT_EQ(ErrorOf({"s", "--tol", "nan"}), "--tol expects a number, got 'nan'");
   EXPECT_EQ(ErrorOf({"s", "--tol", "0"}), "--tol expects a number > 0, got '0'");
-  EXPECT_EQ(ErrorOf({"s", "--duration-s", "-5"}), "--duration-s expects a number > 0, got '-5'");
+  EXPECT_EQ(ErrorOf({"s", "--duration-s", "-5"}), "--duration-s expects a number in (0, 1e+06], got '-5'");
+  // Beyond 10^6 s a 1 kHz tick count overflowed (2.2e6 s: "the number of ticks must be positive").
+  EXPECT_EQ(ErrorOf({"s", "--duration-s", "2.2e6"}), "--duration-s expects a number in (0, 1e+06], got '2.2e6'");
   EXPECT_EQ(ErrorOf({"s", "--domain", "231"}), "--domain expects an integer in [0, 230], got '231'");
   EXPECT_EQ(ErrorOf({"s", "--solver", "newton"}),
             "--solver expects local-uzawa | global-uzawa-gs | global-uzawa-jacobi | reference, got 'newton'");
@@ -75,6 +77,38 @@ TEST(CommandLineTest, BadInputNamesTheOptionAndTheRange) {
   EXPECT_EQ(ErrorOf({"s", "extra"}), "unexpected argument 'extra' (see --help)");
   EXPECT_EQ(ErrorOf({"--steps", "3"}), "missing SCENE argument (see --help)");
   EXPECT_EQ(ErrorOf({"s", "--steps"}), "--steps needs a value (see --help)");
+}
+
+// Output paths are checked when the command line is read: hapco-sim --output DIR ran the whole
+// simulation, then failed to rename its partial file and left it behind; "" meant "no file"
+// in some tools and was refused in others.
+TEST(CommandLineTest, OutputPathsAndEmptyValuesAreCheckedBeforeAnyWork) {
+  const std::string dir = ::testing::TempDir();
+  EXPECT_EQ(ErrorOf({"s", "-o", dir}), "--output: " + dir + " is a directory");
+  EXPECT_EQ(ErrorOf({"s", "-o", dir + "/no-such-folder/out.rec"}),
+            "--output: the folder " + dir + "/no-such-folder of " + dir + "/no-such-folder/out.rec does not exist");
+  EXPECT_EQ(ErrorOf({"s", "-o", ""}), "--output needs a file name (leave the option out for no file)");
+  EXPECT_EQ(ErrorOf({"s", "-o", dir + "/out.rec"}), "");
+  EXPECT_EQ(ErrorOf({"s", "-o", "/dev/null"}), "") << "an existing writable file is fine wherever it is";
+  // Text and folders.
+  ToyOptions options;
+  std::string name, folder;
+  TOY_COMMAND(command);
+  DefineToy(command, &options);
+  command.AddText("--name", &name, "ID", "a name", "Run");
+  command.AddOutputDirectory("--plots", &folder, "DIR", "charts", "Output");
+  const auto error_of = [&](const std::vector<std::string>& arguments) -> std::string {
+    try {
+      (void)command.Parse(arguments);
+    } catch (const InputError& error) {
+      return error.what();
+    }
+    return "";
+  };
+  EXPECT_EQ(error_of({"s", "--name", ""}), "--name needs a value (leave the option out for its default)");
+  EXPECT_EQ(error_of({"s", "--plots", dir + "/new/deeper"}), "") << "made when needed";
+  EXPECT_EQ(error_of({"s", "--plots", "/dev/null/charts"}),
+            "--plots: /dev/null is not a folder (the output folder /dev/null/charts cannot be made there)");
 }
 
 TEST(CommandLineTest, OldSpellingsKeepWorkingWithANote) {
