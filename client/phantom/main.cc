@@ -190,6 +190,11 @@ int Run(const Options& o) {
               static_cast<unsigned long long>(s.server_moves),
               static_cast<unsigned long long>(s.server_leases_lapsed),
               static_cast<unsigned long long>(s.server_leases_regained));
+  if (s.foreign_forces > 0) {
+    std::printf("  %llu forces for poses this device never sent, not rendered: another device uses the client id "
+                "'%s'? Give each device its own --client-id\n",
+                static_cast<unsigned long long>(s.foreign_forces), o.client_id.c_str());
+  }
   if (config.render.mode == phantom::RenderMode::kLocalModel || config.render.passivity) {
     std::printf("  rendering %s: %llu ticks from a contact model, %llu from the surface ahead (%llu models; stiffness "
                 "capped %llu, extrapolation capped %llu ticks, pull prevented %llu, friction cone %llu); passivity "

@@ -371,6 +371,10 @@ void PhantomClient::Run(const std::atomic<bool>& stop, const std::function<void(
   uint64_t last_force_sequence = 0;
   bool any_force = false, was_stale = false;
   double last_notice_log_s = -1;  // when the last "server ignores poses" line was logged
+  double last_foreign_log_s = -1;  // when the last "forces for poses never sent" line was logged
+  // Send time of the last kSentPoses poses by sequence % kSentPoses (8 s at 1 kHz: an answer
+  // later than that is stale anyway); 0 = none sent (MonotonicNowNs is never 0 after boot).
+  std::vector<int64_t> sent_time_ns(kSentPoses, 0);
   Eigen::Vector3d rendered = Eigen::Vector3d::Zero();
   Eigen::Vector3d previous_position = trajectory[0];
   constexpr int64_t kMoveRetryNs = 100'000'000, kMinMoveIntervalNs = 1'000'000'000;
@@ -437,6 +441,7 @@ void PhantomClient::Run(const std::atomic<bool>& stop, const std::function<void(
       pose.sequence_number = static_cast<uint64_t>(tick);
       pose.client_time_ns = MonotonicNowNs();
       pose.position_m = {position.x(), position.y(), position.z()};
+      sent_time_ns[static_cast<std::size_t>(pose.sequence_number % kSentPoses)] = pose.client_time_ns;
       if (dds_->pose_writer.Write(pose) == DDS_RETCODE_OK) {
         ++stats_.poses_published;
       } else {
@@ -474,6 +479,22 @@ void PhantomClient::Run(const std::atomic<bool>& stop, const std::function<void(
         continue;
       }
       stats_.server_ignored_poses = r.server_ignored_poses;
+      // An answer to a pose this device sent carries that pose's sequence and send time. Two
+      // devices started with the same --client-id each rendered the other's forces (one
+      // hovering 5 mm above the bar felt 5.8 N), and neither was told (a helper session).
+      if (sent_time_ns[static_cast<std::size_t>(r.pose_sequence % kSentPoses)] != r.client_time_ns) {
+        ++stats_.foreign_forces;
+        if (log && (last_foreign_log_s < 0 || now_s - last_foreign_log_s >= 1.0)) {
+          last_foreign_log_s = now_s;
+          char line[240];
+          std::snprintf(line, sizeof(line),
+                        "t=%.3f s: forces for poses this device never sent (%llu so far, not rendered): another "
+                        "device uses the client id '%s'? Give each device its own --client-id",
+                        now_s, static_cast<unsigned long long>(stats_.foreign_forces), config_.client_id.c_str());
+          log(line);
+        }
+        continue;
+      }
       if (any_force && r.pose_sequence <= last_force_sequence) {
         ++stats_.forces_reordered;
         continue;

@@ -100,6 +100,9 @@ struct ClientStats {
   uint64_t forces_received = 0;     // in order, new sequence
   uint64_t answers_recovered = 0;   // of which recovered from a later force's repeated answers
   uint64_t forces_reordered = 0;    // older than one already taken: logged, not rendered
+  // Answers to poses this device never sent (sequence and send time match none of its own):
+  // another device under the same client id. Logged, never rendered.
+  uint64_t foreign_forces = 0;
   uint64_t arrivals_overflowed = 0; // arrival queue full (tick thread stalled): dropped
   uint64_t missed_ticks = 0;        // servo deadlines that passed without a tick
   uint64_t stale_ticks = 0, rejected_non_finite = 0, clamped = 0;
@@ -178,6 +181,7 @@ class PhantomClient {
 
   // Single-producer (receive thread) single-consumer (tick thread) queue of arrivals.
   static constexpr uint32_t kArrivalCapacity = 256;
+  static constexpr std::size_t kSentPoses = 8192;  // poses remembered to tell this device's answers
   // Connect: no new server for this long = every server of the domain has been found.
   static constexpr std::chrono::milliseconds kServerDiscoverySettle{250};
   std::array<ReceivedForce, kArrivalCapacity> arrivals_;

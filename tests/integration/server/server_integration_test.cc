@@ -180,6 +180,55 @@ TEST(ServerProcess, FreePathOffTheScriptedFootprintGetsTheOfflineForces) {
   EXPECT_GT(last.z(), 0.5) << "pressed 2 mm, 30 mm off the scripted footprint: " << last.transpose();
 }
 
+// Two devices started with the same --client-id share one session: each got the other's
+// answers too and rendered them (a helper session's device hovering 5 mm above the bar felt
+// 5.8 N). An answer carries its pose's sequence and send time; a device renders only answers
+// to poses it sent, counts the rest, and says so.
+TEST(ServerProcess, TwoDevicesUnderOneClientIdRenderOnlyTheirOwnAnswers) {
+  const std::string dir = TestDir();
+  const std::string domain = std::to_string(SetUpTestDomain());
+  {
+    std::ofstream press(dir + "/press.csv"), hover(dir + "/hover.csv");
+    press << "x_m,y_m,z_m\n";
+    hover << "x_m,y_m,z_m\n";
+    for (int k = 1; k <= 20; ++k) press << 0 << "," << 0 << "," << -1e-4 * k << "\n";
+    for (int k = 0; k < 20; ++k) hover << 0 << "," << 0 << "," << 0.005 << "\n";
+  }
+  Process server({HAPCO_SERVER_EXE, kScene, "--domain", domain}, dir + "/server.out", dir + "/server.err");
+  {
+    Process presser({HAPCO_PHANTOM_EXE, kScene, "--client-id", "twin", "--domain", domain, "--trajectory",
+                     dir + "/press.csv", "--duration-s", "3", "--csv", dir + "/press_ticks.csv", "--connect-timeout-s",
+                     "60"},
+                    dir + "/presser.out", dir + "/presser.err");
+    Process hoverer({HAPCO_PHANTOM_EXE, kScene, "--client-id", "twin", "--domain", domain, "--trajectory",
+                     dir + "/hover.csv", "--duration-s", "3", "--csv", dir + "/hover_ticks.csv", "--connect-timeout-s",
+                     "60"},
+                    dir + "/hoverer.out", dir + "/hoverer.err");
+    ASSERT_EQ(presser.Wait(120'000), 0) << ReadFile(dir + "/presser.err");
+    ASSERT_EQ(hoverer.Wait(120'000), 0) << ReadFile(dir + "/hoverer.err");
+  }
+  server.Signal(SIGTERM);
+  ASSERT_EQ(server.Wait(30'000), 0) << ReadFile(dir + "/server.err");
+  // The hovering device, 5 mm above the bar, never renders a force: its own answers are zero.
+  double peak_n = 0.0;
+  for (const auto& row : ReadCsv(dir + "/hover_ticks.csv")) peak_n = std::max(peak_n, Vec(row, "fx_n", "fy_n", "fz_n").norm());
+  EXPECT_EQ(peak_n, 0.0) << ReadFile(dir + "/hoverer.err");
+  // (The pressing device feels its press only when the session answers its poses: which
+  // device's sequence runs ahead is a race, so that is not asserted.)
+  // The session answers whichever device's sequence is newest (the other's poses are
+  // "repeated" and ignored), so at least one device receives the other's answers: it is told,
+  // on stderr and in its summary.
+  int told = 0;
+  for (const char* who : {"presser", "hoverer"}) {
+    const bool in_log = ReadFile(dir + "/" + who + ".err").find("forces for poses this device never sent") != std::string::npos;
+    const bool in_summary =
+        ReadFile(dir + "/" + who + ".out").find("forces for poses this device never sent, not rendered") != std::string::npos;
+    EXPECT_EQ(in_log, in_summary) << who;
+    told += in_log ? 1 : 0;
+  }
+  EXPECT_GE(told, 1) << ReadFile(dir + "/presser.err") << ReadFile(dir + "/hoverer.err");
+}
+
 // A device whose poses the server ignores is told so (issue 18): after 100 good poses the
 // path jumps 50 mm (beyond 10 x --max-jump-m, so every later pose is a jump). The server
 // answers the ignored poses with notices (last force, verdict), at most one per 100 ms; the
