@@ -272,7 +272,21 @@ bool PhantomClient::Connect(std::string* why, const std::function<void(const std
     server_id_ = ChooseServer("");
   }
   SendJoin();
-  if (!dds_->force_reader.WaitForWriters(1, timeout_ns)) {
+  // A full server refuses the JOIN and forgets it; a slot may free up (a client leaves, or an
+  // idle session of a killed one is closed, --session-idle-s): ask again every second until
+  // the timeout. (Asking once, a client refused while full waited out its whole timeout.)
+  bool session = false;
+  for (dds_duration_t left_ns = timeout_ns; left_ns > 0 && !session; left_ns -= DDS_SECS(1)) {
+    session = dds_->force_reader.WaitForWriters(1, std::min<dds_duration_t>(left_ns, DDS_SECS(1)));
+    if (!session && left_ns > DDS_SECS(1)) {
+      if (config_.server_id.empty()) {
+        const std::string next = ChooseServer("");
+        if (!next.empty()) server_id_ = next;
+      }
+      SendJoin();
+    }
+  }
+  if (!session) {
     if (why != nullptr) {
       char seconds[32];
       std::snprintf(seconds, sizeof seconds, "%g", config_.connect_timeout_s);

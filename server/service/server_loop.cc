@@ -103,6 +103,7 @@ void ServerLoop::Run() {
     ProcessPoses();
     const int64_t now = MonotonicNowNs();
     if (now >= next_status_ns) {
+      CloseIdleSessions(now);
       PublishStatus(now);
       next_status_ns = now + period_ns;
     } else if (sessions_.size() != announced_sessions_) {
@@ -151,6 +152,7 @@ ServerLoop::Client* ServerLoop::OpenSession(const std::string& client_id, const 
   }
   try {
     Client client;
+    client.last_heard_ns = MonotonicNowNs();
     client.session = std::make_unique<Session>(client_id, model, participant_, force_topic_, contact_topic_,
                                                options_.time_budget_s, options_.physics, options_.local_model,
                                                options_.server_id, options_.multirate);
@@ -164,6 +166,23 @@ ServerLoop::Client* ServerLoop::OpenSession(const std::string& client_id, const 
   } catch (const std::exception& error) {
     Log(kLogFailure, "cannot open a session for '" + client_id + "': " + error.what());
     return nullptr;
+  }
+}
+
+void ServerLoop::CloseIdleSessions(int64_t now_ns) {
+  if (!(options_.session_idle_s > 0)) return;
+  const auto idle_ns = static_cast<int64_t>(options_.session_idle_s * 1e9);
+  for (auto it = sessions_.begin(); it != sessions_.end();) {
+    const auto next = std::next(it);
+    if (now_ns - it->second.last_heard_ns > idle_ns) {
+      char seconds[32];
+      std::snprintf(seconds, sizeof seconds, "%.1f", static_cast<double>(now_ns - it->second.last_heard_ns) * 1e-9);
+      ++counters_.idle_sessions_closed;
+      Log(kLogSession, "session closed for '" + it->first + "': nothing heard from it for " + seconds +
+                           " s (--session-idle-s); it gets a new session if it comes back");
+      CloseSession(it);
+    }
+    it = next;
   }
 }
 
@@ -260,6 +279,7 @@ void ServerLoop::ProcessSessionControls() {
       }
       continue;
     }
+    if (it != sessions_.end()) it->second.last_heard_ns = MonotonicNowNs();
     switch (control.command) {
       case hapco_idl_SESSION_JOIN: {
         left_clients_.erase(id);
@@ -278,6 +298,10 @@ void ServerLoop::ProcessSessionControls() {
         }
         if (it == sessions_.end()) {
           if (Client* opened = OpenSession(id, *model)) opened->joined_client_time_ns = control.client_time_ns;
+        } else if (it->second.first_client_time_ns < 0) {
+          // No pose yet: a client asking again while it waits for its session (it repeats its
+          // JOIN every second): nothing to reset.
+          it->second.joined_client_time_ns = control.client_time_ns;
         } else if (control.client_time_ns > 0 && it->second.first_client_time_ns >= control.client_time_ns) {
           // Every pose this session took was sent after the JOIN: they are the stream this JOIN
           // starts (a client moved here and its first poses overtook its JOIN; DDS orders no
@@ -377,6 +401,7 @@ void ServerLoop::ProcessPoses() {
     } else {
       client = &it->second;
     }
+    client->last_heard_ns = receive_ns;
     if (!client->session->open() && !client->session->TryOpen(recorder_probe_.MatchedReaders(), receive_ns)) {
       ++counters_.poses_before_open;  // the session waits for its recorders (Session::TryOpen)
       continue;
@@ -606,6 +631,9 @@ std::string ServerLoop::Summary() const {
                 static_cast<unsigned long long>(c.poses_for_other_servers),
                 static_cast<unsigned long long>(c.sessions_moved_away));
   std::string summary = line;
+  if (c.idle_sessions_closed > 0) {
+    summary += "; sessions closed after --session-idle-s without a message " + std::to_string(c.idle_sessions_closed);
+  }
   if (options_.multirate.physics_every > 1) {
     summary += "; poses answered between steps (--physics-every " + std::to_string(options_.multirate.physics_every) +
                ") " + std::to_string(c.model_answers) + ", extra steps at turning poses " + std::to_string(c.turn_steps);

@@ -46,6 +46,11 @@ struct ServerOptions {
   // Solver wall-clock budget per step, s (0 = none); < 0 keeps the scene's. A step that
   // runs out returns SOLVER_TIME_BUDGET_EXCEEDED with the forces it has.
   double time_budget_s = -1.0;
+  // A session with no pose and no session message for this long is closed, s (0 = never): a
+  // client killed without a LEAVE (SIGKILL, a crash, a cable) held its slot for good, and
+  // --max-sessions of them locked the server (a helper session's two killed clients: a third
+  // refused for 18 s and more). A client that comes back later gets a new session.
+  double session_idle_s = 5.0;
   bool log = true;               // rate-limited stderr log of bad input and sessions
   SecurityIdentity security;     // enabled: a secured participant (service/security.h)
   // Optional step trace (CSV, one row per step: client, sequence, position, force sent);
@@ -78,6 +83,7 @@ struct ServerCounters {
   uint64_t recovered_poses = 0;     // poses never received, stepped from a later pose's repeats
   uint64_t poses_for_other_servers = 0;  // addressed to another server (or unaddressed, not ours)
   uint64_t sessions_moved_away = 0;  // closed because the client joined another server
+  uint64_t idle_sessions_closed = 0;  // closed after ServerOptions::session_idle_s without a message
 };
 
 class ServerLoop {
@@ -117,6 +123,8 @@ class ServerLoop {
     int64_t first_client_time_ns = -1;
     // client_time_ns of the newest SESSION_JOIN this session took (-1: opened by a pose).
     int64_t joined_client_time_ns = -1;
+    // When a pose or a session message of this client last arrived (CLOCK_MONOTONIC, ns).
+    int64_t last_heard_ns = 0;
     // Filled by the stepping job, read by the server thread after the batch.
     PendingPoses stepped;
     std::array<int64_t, kMaxQueuedPoses> step_ns{};
@@ -131,6 +139,7 @@ class ServerLoop {
   void RecoverMissedPoses(Client* client, const hapco_idl_DevicePose& pose, int64_t receive_ns);
   void Queue(Client* client, const hapco_idl_DevicePose& pose, int64_t receive_ns);
   void StepQueued();  // steps the queued poses of every session, on the pool
+  void CloseIdleSessions(int64_t now_ns);  // ServerOptions::session_idle_s
   // period_end: the status period is over (step-time quantiles and CPU use restart);
   // otherwise an announcement between periods after the number of sessions changed.
   void PublishStatus(int64_t now_ns, bool period_end = true);

@@ -91,6 +91,10 @@ bool Parse(int argc, char** argv, Options* options) {
                     "ServerStatus period, s (default 1)", hapco::cli::kGroupDds, 0, HUGE_VAL, true);
   command.AddInteger("--max-sessions", &options->server.max_sessions, "N",
                      "open sessions at most (default 16); further clients are refused", "Sessions", 1, 1000);
+  command.AddNumber("--session-idle-s", &options->server.session_idle_s, "S",
+                    "close a session after S s without a pose or session message from its client (a client "
+                    "killed without leaving would hold its slot for good); 0 = never (default 5)",
+                    "Sessions", 0, HUGE_VAL);
   command.AddInteger("--threads", &options->server.threads, "N",
                      "threads stepping sessions, the server thread included (default: one per online core); "
                      "sessions that got a pose in the same tick are stepped in parallel, each worker publishing "

@@ -234,6 +234,38 @@ TEST(ServerFailover, AClientBeyondMaxSessionsIsRefusedWithAClearMessage) {
       << ReadFile(dir + "/server.err");
 }
 
+// A client killed without a LEAVE (SIGKILL) held its session for good: with --max-sessions 1
+// the next client was refused for as long as the server ran. After --session-idle-s without a
+// pose or session message the session is closed and its slot serves the next client.
+TEST(ServerFailover, AKilledClientsSessionIsClosedWhenIdleAndItsSlotServesTheNext) {
+  const std::string dir = TestDir();
+  const dds_domainid_t domain_id = SetUpTestDomain();
+  const std::string domain = std::to_string(domain_id);
+  Participant participant(domain_id);
+  Topic<hapco_idl_FeedbackForce> force_topic(participant);
+  Subscriber subscriber(participant, ClientPartition("killed"));
+  Reader<hapco_idl_FeedbackForce> killed_forces(subscriber, force_topic);
+  Process server({HAPCO_SERVER_EXE, kScene, "--domain", domain, "--max-sessions", "1", "--session-idle-s", "1",
+                  "--status-period-s", "0.2"},
+                 dir + "/server.out", dir + "/server.err");
+  Process killed({HAPCO_PHANTOM_EXE, kScene, "--client-id", "killed", "--domain", domain, "--duration-s", "60",
+                  "--connect-timeout-s", "60"},
+                 dir + "/killed.out", dir + "/killed.err");
+  ASSERT_TRUE(killed_forces.WaitForData(DDS_SECS(60))) << ReadFile(dir + "/killed.err");
+  killed.Signal(SIGKILL);
+  killed.Wait(30'000);
+  // The next client waits up to 20 s for its session: it opens about 1 s after the kill.
+  Process next({HAPCO_PHANTOM_EXE, kScene, "--client-id", "next", "--domain", domain, "--connect-timeout-s", "20"},
+               dir + "/next.out", dir + "/next.err");
+  EXPECT_EQ(next.Wait(120'000), 0) << ReadFile(dir + "/next.err");
+  EXPECT_NE(ReadFile(dir + "/next.out").find("forces received"), std::string::npos) << ReadFile(dir + "/next.out");
+  server.Signal(SIGTERM);
+  ASSERT_EQ(server.Wait(30'000), 0);
+  const std::string log = ReadFile(dir + "/server.err") + ReadFile(dir + "/server.out");
+  EXPECT_NE(log.find("session closed for 'killed': nothing heard from it for"), std::string::npos) << log;
+  EXPECT_NE(log.find("sessions closed after --session-idle-s without a message 1"), std::string::npos) << log;
+}
+
 // Several servers on one domain (docs/several-servers.md): three servers, four clients that
 // choose their server from the announcements. Each client is answered by one server only; when
 // the server with the most clients is killed, each of its clients moves to another server and
