@@ -175,7 +175,9 @@ CLI::Option* CommandLine::AddText(const std::string& name, std::string* value, c
                                   const std::string& help, const std::string& group) {
   metavars_[name] = metavar;
   // An empty value was taken as the option left out by some tools (--csv "": no CSV, exit 0)
-  // and refused by others: one rule for all.
+  // and refused by others: one rule for all. A LIST may be empty (no items: scripts pass
+  // --loss-cases "" when they have none).
+  if (metavar == "LIST") return app_.add_option(name, *value, help)->group(group);
   const std::string flag = name;
   CLI::Validator not_empty(
       [flag](std::string& text) -> std::string {

@@ -47,7 +47,8 @@ class CommandLine {
                          double maximum, bool open_minimum = false);
   CLI::Option* AddInteger(const std::string& name, int* value, const std::string& metavar,
                           const std::string& help, const std::string& group, long minimum, long maximum);
-  // Any text but "" (an empty value is refused: leave the option out instead).
+  // Any text but "" (an empty value is refused: leave the option out instead), except for
+  // metavar "LIST", which may be empty.
   CLI::Option* AddText(const std::string& name, std::string* value, const std::string& metavar,
                        const std::string& help, const std::string& group);
   // A file to write: not empty, not a directory, in an existing writable folder (checked when
