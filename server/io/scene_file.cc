@@ -545,14 +545,6 @@ sim::SceneSpec ParseSceneText(const std::string& text, const std::string& source
   return SceneChecker(source_name, &tree).Check(scene);
 }
 
-std::unique_ptr<sim::TwoBodyModel> MakeSceneModel(const sim::SceneSpec& scene, const std::string& path) {
-  try {
-    return std::make_unique<sim::TwoBodyModel>(scene);
-  } catch (const InputError& error) {
-    throw InputError(path + ": " + error.what());
-  }
-}
-
 sim::SceneSpec LoadSceneFile(const std::string& path) {
   // (A directory opens as an empty stream: it was reported as "format_version: is 0".)
   std::error_code error;

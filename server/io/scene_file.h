@@ -2,11 +2,9 @@
 // Scene files: protobuf text format (proto/scene.proto), versioned. Every problem in a file
 // (syntax, a value out of range, a body that cannot be held) is reported as one
 // hapco::InputError "FILE:LINE: field.path: what is wrong and what is allowed".
-#include <memory>
 #include <string>
 
 #include "sim/scene.h"
-#include "sim/two_body_model.h"
 
 namespace hapco::io {
 
@@ -14,10 +12,6 @@ inline constexpr int kSceneFormatVersion = 1;
 
 // Reads, checks and converts a text-format scene file. Throws InputError.
 sim::SceneSpec LoadSceneFile(const std::string& path);
-
-// The model of a scene read from `path`: a problem found while building it (the bodies overlap,
-// a group holds no face, ...) is an InputError "PATH: what is wrong", like the file's own.
-std::unique_ptr<sim::TwoBodyModel> MakeSceneModel(const sim::SceneSpec& scene, const std::string& path);
 
 // Same, from text already in memory; `source_name` is used in messages.
 sim::SceneSpec ParseSceneText(const std::string& text, const std::string& source_name);

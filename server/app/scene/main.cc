@@ -15,6 +15,7 @@
 #include "common/timer.h"
 #include "fem/box_mesh.h"
 #include "io/scene_file.h"
+#include "io/scene_model.h"
 #include "sim/compliance_kernels.h"
 #include "sim/scene.h"
 #include "sim/two_body_model.h"

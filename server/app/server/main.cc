@@ -19,6 +19,7 @@
 #include "common/stop_signals.h"
 #include "common/timer.h"
 #include "io/scene_file.h"
+#include "io/scene_model.h"
 #include "service/server_loop.h"
 #include "sim/two_body_model.h"
 

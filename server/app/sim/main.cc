@@ -24,6 +24,7 @@
 #endif
 #include "common/timer.h"
 #include "io/scene_file.h"
+#include "io/scene_model.h"
 #include "io/trajectory_file.h"
 #include "sim/pose_limits.h"
 #include "sim/multirate.h"
