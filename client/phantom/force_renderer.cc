@@ -269,13 +269,18 @@ Eigen::Vector3d ForceRenderer::Command(bool fresh, const Eigen::Vector3d& force_
   return command;
 }
 
-Eigen::Vector3d ForceRenderer::Damp(const Eigen::Vector3d& rendered_n, const Eigen::Vector3d& velocity_m_per_s,
-                                    double tick_s, double max_force_n) {
-  if (!parameters_.passivity) return rendered_n;
-  Eigen::Vector3d out = passivity_.Filter(rendered_n, velocity_m_per_s, tick_s);
-  const double magnitude = out.norm();
-  if (magnitude > max_force_n) out *= max_force_n / magnitude;
-  return out.allFinite() ? out : rendered_n;
+Eigen::Vector3d ForceRenderer::PassivityDamper(const Eigen::Vector3d& command_n,
+                                               const Eigen::Vector3d& velocity_m_per_s, double tick_s) {
+  passivity_alpha_n_s_per_m_ = 0.0;
+  if (!parameters_.passivity || !command_n.allFinite() || !velocity_m_per_s.allFinite()) return Eigen::Vector3d::Zero();
+  passivity_alpha_n_s_per_m_ = passivity_.Damping(command_n, velocity_m_per_s, tick_s);
+  return -passivity_alpha_n_s_per_m_ * velocity_m_per_s;
+}
+
+void ForceRenderer::AccountRendered(const Eigen::Vector3d& command_n, const Eigen::Vector3d& rendered_n,
+                                    const Eigen::Vector3d& velocity_m_per_s, double tick_s) {
+  if (!parameters_.passivity || !command_n.allFinite() || !velocity_m_per_s.allFinite()) return;
+  passivity_.Account(command_n, rendered_n, velocity_m_per_s, tick_s, passivity_alpha_n_s_per_m_);
 }
 
 }  // namespace hapco::phantom

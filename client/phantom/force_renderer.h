@@ -8,9 +8,10 @@
 //                WHC 2015): in contact, the contact model F0 + K (x - x0); apart, the surface
 //                ahead (the nearest obstacle face as a plane, sim/surface_ahead.h), so the
 //                first contact is felt where the device meets it, not a round trip later;
-//   + passivity  either of them, then the time-domain passivity controller (passivity.h) on
-//                what the safety filter lets through: damping exactly when the energy the
-//                device has received goes negative (a delay generating energy).
+//   + passivity  either of them, with the time-domain passivity controller (passivity.h):
+//                a damper exactly when the energy the device has rendered would go negative
+//                (a delay generating energy), rate limited and clamped by the safety filter
+//                like the rest of the force (render_chain.h).
 //
 // A contact model is rendered as a plane with friction on the device, not as the linear model
 // itself (an intermediate representation: Mark et al., SIGGRAPH 1996; the friction cone of
@@ -93,7 +94,11 @@ struct RendererParameters {
   // kept to measure the difference: a residual delayed spring, docs/network-haptics.md).
   ContactRendering contact_rendering = ContactRendering::kPlane;
   int blend_ticks = 5;                 // a new model replaces the old one over this many ticks
-  double max_damping_n_s_per_m = 100.0;  // the passivity controller's cap, N s/m (passivity.h)
+  // The passivity controller's cap, N s/m (passivity.h). An explicit damper α on the device's
+  // effective mass m at the servo period T is stable only for α < 2 m/T and stops flipping
+  // sign tick to tick below m/T; half of that, m/(2T), for a PHANToM's ~0.05 kg at 1 kHz. The
+  // old cap, 2 m/T = 100, chattered at 500 Hz (docs/network-haptics.md).
+  double max_damping_n_s_per_m = 25.0;
 };
 
 // The --render value ("direct", "direct+passivity", "local-model", "local-model+passivity", or
@@ -122,7 +127,7 @@ class ForceRenderer {
 
   // One tick. fresh: a new stepped force arrived this tick (force_n as received, model its
   // FeedbackForce.model). position_m: the device now. Returns the force to hand to the
-  // safety filter (N, not yet limited); the passivity controller comes after it (Damp). A
+  // safety filter (N, not yet limited; RenderChain adds the passivity damper to it). A
   // non-finite force or model is ignored (the previous one stays).
   Eigen::Vector3d Command(bool fresh, const Eigen::Vector3d& force_n, const ReceivedModel& model,
                           const Eigen::Vector3d& position_m, const Eigen::Vector3d& velocity_m_per_s,
@@ -137,12 +142,14 @@ class ForceRenderer {
   // tick (SafetyFilter::Retarget), not only on arrivals.
   bool changes_between_arrivals() const { return parameters_.mode == RenderMode::kLocalModel; }
 
-  // The passivity controller on the force the safety filter lets through (with --passivity;
-  // else the force unchanged): the observer sees exactly what the device renders, the damper
-  // -α v is added after the rate limit (a damper only takes energy out) and the sum is clamped
-  // to max_force_n (when the clamp binds, E may go below 0 by what it cut).
-  Eigen::Vector3d Damp(const Eigen::Vector3d& rendered_n, const Eigen::Vector3d& velocity_m_per_s, double tick_s,
-                       double max_force_n);
+  // The passivity controller (with --passivity; else nothing): PassivityDamper is the damper
+  // -α v (N) the energy books ask for this tick, for the force command_n the environment asks;
+  // RenderChain adds it to the command before the safety filter, so the rate limit and the
+  // clamp hold for the sum. AccountRendered books what the device then rendered.
+  Eigen::Vector3d PassivityDamper(const Eigen::Vector3d& command_n, const Eigen::Vector3d& velocity_m_per_s,
+                                  double tick_s);
+  void AccountRendered(const Eigen::Vector3d& command_n, const Eigen::Vector3d& rendered_n,
+                       const Eigen::Vector3d& velocity_m_per_s, double tick_s);
   const RendererParameters& parameters() const { return parameters_; }
   const RendererStats& stats() const { return stats_; }
   const PassivityController& passivity() const { return passivity_; }
@@ -173,6 +180,7 @@ class ForceRenderer {
   RendererParameters parameters_;
   RendererStats stats_;
   PassivityController passivity_;
+  double passivity_alpha_n_s_per_m_ = 0.0;  // asked this tick (PassivityDamper), N s/m
   Eigen::Vector3d held_force_n_ = Eigen::Vector3d::Zero();  // newest finite force
   ActiveModel current_, previous_;
   int blend_tick_ = 0;  // ticks since current_ took over from previous_

@@ -12,22 +12,30 @@ PassivityController::PassivityController(double max_damping_n_s_per_m) : max_dam
 
 Eigen::Vector3d PassivityController::Filter(const Eigen::Vector3d& force_n, const Eigen::Vector3d& velocity_m_per_s,
                                             double tick_s) {
-  const double environment_j = -force_n.dot(velocity_m_per_s) * tick_s;  // energy into the environment
-  observed_j_ += environment_j;
-  const double candidate_j = energy_j_ + environment_j;
+  const double alpha = Damping(force_n, velocity_m_per_s, tick_s);
+  const Eigen::Vector3d rendered = force_n - alpha * velocity_m_per_s;
+  Account(force_n, rendered, velocity_m_per_s, tick_s, alpha);
+  return rendered;
+}
+
+double PassivityController::Damping(const Eigen::Vector3d& force_n, const Eigen::Vector3d& velocity_m_per_s,
+                                    double tick_s) const {
+  const double candidate_j = energy_j_ - force_n.dot(velocity_m_per_s) * tick_s;
   const double speed_squared = velocity_m_per_s.squaredNorm();
-  last_damping_ = 0;
-  if (candidate_j >= 0 || speed_squared * tick_s <= 0) {
-    energy_j_ = candidate_j;
-    return force_n;
-  }
+  if (candidate_j >= 0 || !(speed_squared * tick_s > 0)) return 0.0;
   // -α v on the device puts α |v|² Δt into the hand's account: α = -E / (|v|² Δt) makes E = 0.
-  last_damping_ = std::min(-candidate_j / (speed_squared * tick_s), max_damping_);
-  const double damper_j = last_damping_ * speed_squared * tick_s;
-  dissipated_j_ += damper_j;
-  energy_j_ = candidate_j + damper_j;
-  ++active_ticks_;
-  return force_n - last_damping_ * velocity_m_per_s;
+  return std::min(-candidate_j / (speed_squared * tick_s), max_damping_);
+}
+
+void PassivityController::Account(const Eigen::Vector3d& force_n, const Eigen::Vector3d& rendered_n,
+                                  const Eigen::Vector3d& velocity_m_per_s, double tick_s, double alpha_n_s_per_m) {
+  observed_j_ += -force_n.dot(velocity_m_per_s) * tick_s;
+  energy_j_ += -rendered_n.dot(velocity_m_per_s) * tick_s;
+  last_damping_ = alpha_n_s_per_m;
+  if (alpha_n_s_per_m > 0) {
+    dissipated_j_ += alpha_n_s_per_m * velocity_m_per_s.squaredNorm() * tick_s;
+    ++active_ticks_;
+  }
 }
 
 void PassivityController::Reset() {

@@ -10,16 +10,23 @@ Eigen::Vector3d RenderChain::Tick(bool fresh, const Eigen::Vector3d& raw_n, cons
                                   double now_s) {
   const double tick_s = safety_parameters_.tick_s;
   command_n_ = renderer_.Command(fresh, raw_n, model, position_m, velocity_m_per_s, tick_s);
+  // The passivity damper joins the command before the safety filter: its changes are rate
+  // limited and the sum clamped like any other force (after the filter it flipped up to 2.2 N
+  // tick to tick; docs/network-haptics.md). Zero without --passivity.
+  const Eigen::Vector3d damper_n = renderer_.PassivityDamper(command_n_, velocity_m_per_s, tick_s);
   Eigen::Vector3d rendered;
-  // Direct mode renders arrivals as they come (the safety filter holds them between
-  // arrivals); a local model changes the command every tick.
-  if (renderer_.changes_between_arrivals() && (!fresh || raw_n.allFinite())) {
-    if (!fresh) safety_.Retarget(command_n_);
-    rendered = safety_.Update(fresh, command_n_, now_s, renderer_.motion_change_n());
+  // A local model changes the command every tick, and so does a damper; direct rendering
+  // without one renders arrivals as they come (the safety filter holds them between arrivals).
+  const bool every_tick = renderer_.changes_between_arrivals() || renderer_.parameters().passivity;
+  if (every_tick && (!fresh || raw_n.allFinite())) {
+    const Eigen::Vector3d target_n = command_n_ + damper_n;
+    if (!fresh) safety_.Retarget(target_n);
+    rendered = safety_.Update(fresh, target_n, now_s, renderer_.motion_change_n());
   } else {
     rendered = safety_.Update(fresh, raw_n, now_s);  // direct, or a non-finite arrival (rejected, counted)
   }
-  return renderer_.Damp(rendered, velocity_m_per_s, tick_s, safety_parameters_.max_force_n);
+  renderer_.AccountRendered(command_n_, rendered, velocity_m_per_s, tick_s);
+  return rendered;
 }
 
 }  // namespace hapco::phantom

@@ -2,10 +2,10 @@
 // One servo tick of what a device renders from the network's arrivals, in the order the
 // device needs it (docs/network-haptics.md): the renderer (the newest force, or a local model
 // at the current position) -> the safety filter (7.9 N, 250 N/s beyond the model's response to
-// the device's own motion, the timeout ramp) -> the passivity controller (a damper that only
-// takes energy out). hapco-phantom, hapco-loadtest and the offline network study
-// (network_haptics_study) all render through this, so what is measured offline is what the
-// clients do.
+// the device's own motion, the timeout ramp), with the passivity controller's damper (which
+// only takes energy out) joining the command before the filter so it is rate limited too.
+// hapco-phantom, hapco-loadtest and the offline network study (network_haptics_study) all
+// render through this, so what is measured offline is what the clients do.
 #include <Eigen/Dense>
 
 #include "force_renderer.h"
