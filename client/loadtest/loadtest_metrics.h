@@ -41,7 +41,7 @@ struct ServerForce {
 // design.md example 4); ticks beyond max_ticks are counted but not kept.
 class ClientRecorder {
  public:
-  ClientRecorder(int max_ticks, double tick_s);
+  explicit ClientRecorder(int max_ticks);
   void OnTick(const phantom::TickRecord& record);
 
   const std::vector<TickSample>& ticks() const { return ticks_; }
@@ -54,8 +54,6 @@ class ClientRecorder {
   std::atomic<uint64_t> progress_ticks{0};
 
  private:
-  double tick_s_;
-  int64_t previous_tick_ns_ = 0;
   std::vector<TickSample> ticks_;
   std::vector<ServerForce> server_forces_;
   uint64_t dropped_ticks_ = 0;

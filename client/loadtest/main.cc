@@ -398,7 +398,7 @@ int Run(const Options& o) {
     config.client_id = run->id;
     config.security = identity;
     run->client = std::make_unique<phantom::PhantomClient>(std::move(config));
-    run->recorder = std::make_unique<loadtest::ClientRecorder>(base.ticks + base.drain_ticks + 16, tick_s);
+    run->recorder = std::make_unique<loadtest::ClientRecorder>(base.ticks + base.drain_ticks + 16);
     runs.push_back(std::move(run));
   }
 

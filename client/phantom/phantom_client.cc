@@ -425,11 +425,12 @@ void PhantomClient::Run(const std::atomic<bool>& stop, const std::function<void(
     while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &wake, nullptr) != 0) {
     }
     const int64_t now = MonotonicNowNs();
+    int64_t missed_before = 0;
     if (now - deadline_ns > period_ns) {
       // Overrun: count the ticks that never ran and realign to the grid (no burst of poses).
-      const int64_t late = (now - deadline_ns) / period_ns;
-      stats_.missed_ticks += static_cast<uint64_t>(late);
-      deadline_ns += late * period_ns;
+      missed_before = (now - deadline_ns) / period_ns;
+      stats_.missed_ticks += static_cast<uint64_t>(missed_before);
+      deadline_ns += missed_before * period_ns;
     }
     deadline_ns += period_ns;
     const double now_s = static_cast<double>(now - start_ns) * 1e-9;
@@ -590,6 +591,7 @@ void PhantomClient::Run(const std::atomic<bool>& stop, const std::function<void(
       record.pose_sequence = publishing ? static_cast<uint64_t>(tick) : 0;
       record.time_s = now_s;
       record.tick_ns = now;
+      record.missed_before = static_cast<int>(missed_before);
       record.position_m = position;
       record.velocity_m_per_s = velocity;
       record.forces = taken;

@@ -86,6 +86,7 @@ struct TickRecord {
   uint64_t pose_sequence = 0;      // = tick when published
   double time_s = 0;               // since the loop started, s
   int64_t tick_ns = 0;             // CLOCK_MONOTONIC when the tick woke, ns
+  int missed_before = 0;           // servo deadlines that passed without a tick just before this one
   Eigen::Vector3d position_m = Eigen::Vector3d::Zero();        // device position (as published)
   Eigen::Vector3d velocity_m_per_s = Eigen::Vector3d::Zero();  // device velocity
   std::span<const ReceivedForce> forces;  // taken this tick, oldest first; the last is rendered

@@ -145,8 +145,8 @@ TEST(LoopTrajectory, GoesBackAndForthWithoutJumps) {
   for (std::size_t i = 0; i < loop.size(); ++i) EXPECT_EQ(loop[i].x(), expected[i]) << i;
 }
 
-TEST(ClientRecorder, KeepsServerForcesByPoseAndCountsMissedTicksFromTheTickTimes) {
-  ClientRecorder recorder(8, kTick);
+TEST(ClientRecorder, KeepsServerForcesByPoseAndTheLoopsMissedTicks) {
+  ClientRecorder recorder(8);
   phantom::ReceivedForce f;
   f.pose_sequence = 1;
   f.client_time_ns = 1'000'000;
@@ -160,7 +160,8 @@ TEST(ClientRecorder, KeepsServerForcesByPoseAndCountsMissedTicksFromTheTickTimes
   r.forces = std::span<const phantom::ReceivedForce>(&f, 1);
   recorder.OnTick(r);
   r.tick = 2;
-  r.tick_ns = 5'000'000;  // 4 ms later: ticks at 2, 3 and 4 ms never ran
+  r.tick_ns = 5'000'000;  // 4 ms later: the loop says the ticks at 2, 3 and 4 ms never ran
+  r.missed_before = 3;
   r.forces = {};
   recorder.OnTick(r);
   ASSERT_EQ(recorder.ticks().size(), 2u);
