@@ -124,9 +124,18 @@ LocalSolve SolveLocal(const Options& options, const contact::ContactProblem& pro
   out.result.Reserve(m, params.max_iterations);
   out.status = contact::Solve(options.solver, problem, params, &workspace, &out.result);
   if (stored.num_contacts() > 0 && !(contact::Fc3dError(stored, out.result.force_n) < options.fc3d_tolerance)) {
+    // The refinement shares --max-iter with the first solve: the user's cap is on the total
+    // (a helper saw 24 outer iterations reported under --max-iter 20).
+    const contact::SolverStats first = out.result.stats;
+    const int left = params.max_iterations - first.iterations;
+    if (left <= 0) {
+      out.status = contact::SolverStatus::kMaxIterations;
+      out.refine_iterations = 0;
+      return out;
+    }
     contact::SolverParameters refine = params;
     refine.warm_start = true;
-    const contact::SolverStats first = out.result.stats;
+    refine.max_iterations = left;
     out.status = contact::Solve(options.solver, stored, refine, &workspace, &out.result);
     out.refine_iterations = out.result.stats.iterations;
     out.result.stats.iterations += first.iterations;
