@@ -244,6 +244,8 @@ def main():
     local_file(path("bad_upper_triangle_triplet.hdf5"), upper_triangle_triplet)
     local_file(path("bad_spacedim2.hdf5"), csc_writer, spacedim=2)
     local_file(path("bad_nan_q.hdf5"), csc_writer, q=np.where(np.arange(9) == 4, np.nan, Q))
+    # Valid, but scaled beyond what double precision solves (hapco-solve refuses it).
+    local_file(path("bad_scale_q_1e160.hdf5"), csc_writer, q=Q * 1e160)
     local_file(path("bad_short_x.hdf5"), short_x_csc)
     local_file(path("bad_mu_size.hdf5"), csc_writer, mu=MU[:2])
     local_file(path("bad_vlen_title.hdf5"), csc_writer, info={})

@@ -183,9 +183,30 @@ int ExitCodeOf(contact::SolverStatus status) {
   return status == contact::SolverStatus::kConverged ? kExitConverged : kExitNotConverged;
 }
 
+// Magnitudes of W's and q's entries the solvers handle: their errors and steps square and
+// multiply these, and beyond ~1e140 they overflow or underflow (a helper session scaled a
+// problem by 1e±160: "diverged" with a NaN merit, or "converged" with an error of 0). 1e±100
+// solves like the unscaled file. Beyond it the file is refused with what to do.
+constexpr double kLargestSolvableEntry = 1e100;
+
+void CheckSolvableScale(const std::string& path, const char* name, const Eigen::Ref<const Eigen::MatrixXd>& values) {
+  const double largest = values.size() > 0 ? values.cwiseAbs().maxCoeff() : 0.0;
+  if (largest > kLargestSolvableEntry || (largest > 0.0 && largest < 1.0 / kLargestSolvableEntry)) {
+    char text[320];
+    std::snprintf(text, sizeof(text),
+                  "FCLIB file '%s': the largest |%s| entry is %.3g, outside [1e-100, 1e100], where the solvers' "
+                  "norms overflow or underflow in double precision: rescale the problem (other units for "
+                  "forces or lengths) and solve it again",
+                  path.c_str(), name, largest);
+    throw hapco::InputError(text);
+  }
+}
+
 int RunLocal(const Options& options) {
   fclib::FclibFileDetails details;
   const contact::ContactProblem problem = fclib::ReadFclibLocalProblem(options.problem_path, &details);
+  CheckSolvableScale(options.problem_path, "W", problem.flexibility_m_per_n);
+  CheckSolvableScale(options.problem_path, "q", problem.free_displacement_m);
   const std::optional<fclib::FclibSolution> stored_solution = fclib::ReadFclibSolution(options.problem_path);
   const int m = problem.num_contacts();
   const bool asymmetric = details.stored_problem.num_contacts() > 0;
