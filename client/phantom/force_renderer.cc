@@ -262,6 +262,16 @@ Eigen::Vector3d ForceRenderer::Command(bool fresh, const Eigen::Vector3d& force_
       command += friction;
       if (last_position_m_.allFinite() && modelled) motion_change_n_ += friction - friction_before;
     }
+    // The safety filter lets this part through unlimited on the promise that it is a spring
+    // of at most the stiffness cap. A field with an edge breaks that promise: the surface
+    // ahead ends 10 mm from the pose it answered, and a device 2 mm under it crossing that
+    // edge went 0 -> 6 N (7.9 N, the clamp) in one tick (a helper session, 200 ms round trip).
+    // Beyond the cap's spring the change is rate limited like any other.
+    if (last_position_m_.allFinite()) {
+      const double spring_n = parameters_.max_stiffness_n_per_m * (position_m - last_position_m_).norm();
+      const double motion_n = motion_change_n_.norm();
+      if (motion_n > spring_n) motion_change_n_ *= spring_n / motion_n;
+    }
     if (blend_tick_ < parameters_.blend_ticks) ++blend_tick_;
     if (current_.kind == ModelKind::kContact) ++stats_.model_ticks;
   }

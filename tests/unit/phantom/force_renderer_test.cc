@@ -232,6 +232,41 @@ TEST(ForceRenderer, TheSurfaceAheadIsFeltWhereTheDeviceMeetsIt) {
   EXPECT_EQ(s.stats().surfaces_received, 0u);
 }
 
+TEST(ForceRenderer, TheEdgeOfTheSurfacesReachIsRateLimited) {
+  // The surface ahead answered at (0, 0, 1 mm), the top face at z = 0; the device 2 mm under it
+  // slides along x across the surface's reach (10 mm from the pose answered) in 0.1 mm ticks:
+  // 6 N inside, nothing beyond. Through the chain that edge is rate limited both ways: at most
+  // 0.25 N a tick beyond what a 3000 N/m spring gives for the tick's 0.1 mm (it jumped 0 -> 6 N).
+  ReceivedModel ahead;
+  ahead.position_m = Eigen::Vector3d(0, 0, 1e-3);
+  ahead.surface_ahead = true;
+  ahead.surface_gap_m = 1e-3;
+  ahead.surface_normal = Eigen::Vector3d::UnitZ();
+  for (const double direction : {1.0, -1.0}) {
+    RenderChain chain(LocalModel(), SafetyParameters{});
+    double x = direction > 0 ? 5e-3 : 12e-3;
+    Eigen::Vector3d position(x, 0, -2e-3), previous_force = Eigen::Vector3d::Zero();
+    double largest_excess_n = -1.0, largest_force_n = 0.0;
+    for (int tick = 0; tick < 150; ++tick) {
+      const Eigen::Vector3d previous_position = position;
+      if (tick >= 60) x += direction * 1e-4;
+      position.x() = x;
+      // One arrival, then the model alone (no timeout: arrivals repeat every 20 ticks).
+      const bool fresh = tick % 20 == 0;
+      const Eigen::Vector3d f =
+          chain.Tick(fresh, Eigen::Vector3d::Zero(), ahead, position, Eigen::Vector3d::Zero(), tick * kTick);
+      if (tick > 0) {
+        largest_excess_n = std::max(largest_excess_n, (f - previous_force).norm() - 0.25 -
+                                                          3000.0 * (position - previous_position).norm());
+      }
+      largest_force_n = std::max(largest_force_n, f.norm());
+      previous_force = f;
+    }
+    EXPECT_NEAR(largest_force_n, 6.0, 1e-9) << "the surface is felt at 3000 N/m x 2 mm";
+    EXPECT_LE(largest_excess_n, 1e-12) << (direction > 0 ? "leaving" : "entering") << " the surface's reach";
+  }
+}
+
 TEST(ForceRenderer, ANewModelTakesOverWithoutAJump) {
   RendererParameters p = LocalModel();
   p.blend_ticks = 5;
