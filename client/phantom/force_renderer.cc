@@ -1,6 +1,7 @@
 #include "force_renderer.h"
 
 #include <algorithm>
+#include <limits>
 #include <cmath>
 
 #include "common/error.h"
@@ -49,7 +50,11 @@ std::string RenderingName(const RendererParameters& parameters) {
 }
 
 ForceRenderer::ForceRenderer(const RendererParameters& parameters)
-    : parameters_(parameters), passivity_(parameters.max_damping_n_s_per_m) {
+    : parameters_(parameters),
+      // Relaxed rules only with a local model (passivity.h).
+      passivity_(parameters.max_damping_n_s_per_m, parameters.mode == RenderMode::kLocalModel
+                                                       ? parameters.local_model_passivity
+                                                       : PassivityRules::Strict()) {
   HAPCO_ASSERT(parameters.max_stiffness_n_per_m > 0 && parameters.max_extrapolation_m >= 0 &&
                    parameters.blend_ticks >= 1,
                "ForceRenderer: bad parameters");
@@ -289,8 +294,10 @@ Eigen::Vector3d ForceRenderer::PassivityDamper(const Eigen::Vector3d& command_n,
 
 void ForceRenderer::AccountRendered(const Eigen::Vector3d& command_n, const Eigen::Vector3d& rendered_n,
                                     const Eigen::Vector3d& velocity_m_per_s, double tick_s) {
+  const double alpha = passivity_alpha_n_s_per_m_;
+  passivity_alpha_n_s_per_m_ = 0.0;  // asked for this tick only
   if (!parameters_.passivity || !command_n.allFinite() || !velocity_m_per_s.allFinite()) return;
-  passivity_.Account(command_n, rendered_n, velocity_m_per_s, tick_s, passivity_alpha_n_s_per_m_);
+  passivity_.Account(command_n, rendered_n, velocity_m_per_s, tick_s, alpha);
 }
 
 }  // namespace hapco::phantom

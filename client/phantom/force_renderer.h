@@ -99,6 +99,9 @@ struct RendererParameters {
   // sign tick to tick below m/T; half of that, m/(2T), for a PHANToM's ~0.05 kg at 1 kHz. The
   // old cap, 2 m/T = 100, chattered at 500 Hz (docs/network-haptics.md).
   double max_damping_n_s_per_m = 25.0;
+  // The passivity controller's rules with a local model (passivity.h); direct rendering uses
+  // PassivityRules::Strict().
+  PassivityRules local_model_passivity = PassivityRules::ForLocalModel();
 };
 
 // The --render value ("direct", "direct+passivity", "local-model", "local-model+passivity", or

@@ -197,15 +197,21 @@ int Run(const Options& o) {
   }
   if (config.render.mode == phantom::RenderMode::kLocalModel || config.render.passivity) {
     std::printf("  rendering %s: %llu ticks from a contact model, %llu from the surface ahead (%llu models; stiffness "
-                "capped %llu, extrapolation capped %llu ticks, pull prevented %llu, friction cone %llu); passivity "
-                "dissipated %.4f J on %lld ticks\n",
+                "capped %llu, extrapolation capped %llu ticks, pull prevented %llu, friction cone %llu)\n",
                 phantom::RenderingName(config.render).c_str(), static_cast<unsigned long long>(s.render.model_ticks),
                 static_cast<unsigned long long>(s.render.surface_ticks),
                 static_cast<unsigned long long>(s.render.models_received),
                 static_cast<unsigned long long>(s.render.stiffness_capped),
                 static_cast<unsigned long long>(s.render.extrapolation_capped),
-                static_cast<unsigned long long>(s.render.pull_prevented), static_cast<unsigned long long>(s.render.cone_limited),
-                s.passivity_dissipated_j, static_cast<long long>(s.passivity_active_ticks));
+                static_cast<unsigned long long>(s.render.pull_prevented), static_cast<unsigned long long>(s.render.cone_limited));
+  }
+  if (config.render.passivity) {
+    // E: the energy the device's rendered forces took from the hand, J (passive: >= 0, or
+    // within the dead band with a local model; passivity.h).
+    std::printf("  passivity: E min %.3g J, final %.3g J; the damper asked for %.4f J on %lld ticks, %.4f J of debt "
+                "forgiven\n",
+                s.passivity_min_energy_j, s.passivity_final_energy_j, s.passivity_dissipated_j,
+                static_cast<long long>(s.passivity_active_ticks), s.passivity_forgiven_j);
   }
   if (s.first_force_arrival_ns >= 0) {
     std::printf("  start-up: connected after %.3f s, first force %.3f s after start\n",

@@ -603,6 +603,9 @@ void PhantomClient::Run(const std::atomic<bool>& stop, const std::function<void(
   }
   stats_.render = renderer.stats();
   stats_.passivity_dissipated_j = renderer.passivity().dissipated_j();
+  stats_.passivity_forgiven_j = renderer.passivity().forgiven_j();
+  stats_.passivity_min_energy_j = renderer.passivity().min_energy_j();
+  stats_.passivity_final_energy_j = renderer.passivity().energy_j();
   stats_.passivity_active_ticks = renderer.passivity().active_ticks();
   stats_.stale_ticks = safety.stale_ticks();
   stats_.rejected_non_finite = safety.rejected_non_finite();

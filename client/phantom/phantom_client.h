@@ -119,7 +119,9 @@ struct ClientStats {
   uint64_t server_ignored_poses = 0;  // the server's count in the newest sample
   double peak_rendered_n = 0;
   RendererStats render;                 // the force renderer's counts (force_renderer.h)
-  double passivity_dissipated_j = 0;    // energy the passivity controller took out, J
+  double passivity_dissipated_j = 0;    // energy the passivity controller's damper asked for, J
+  double passivity_forgiven_j = 0;      // debt forgiven by its time constant, J (passivity.h)
+  double passivity_min_energy_j = 0, passivity_final_energy_j = 0;  // its books E, J
   int64_t passivity_active_ticks = 0;   // ticks it damped
   int64_t first_force_arrival_ns = -1;  // CLOCK_MONOTONIC when the first force arrived (-1: none)
   std::vector<double> round_trip_us;       // pose sampled -> force arrived

@@ -13,7 +13,10 @@ Eigen::Vector3d RenderChain::Tick(bool fresh, const Eigen::Vector3d& raw_n, cons
   // The passivity damper joins the command before the safety filter: its changes are rate
   // limited and the sum clamped like any other force (after the filter it flipped up to 2.2 N
   // tick to tick; docs/network-haptics.md). Zero without --passivity.
-  const Eigen::Vector3d damper_n = renderer_.PassivityDamper(command_n_, velocity_m_per_s, tick_s);
+  // Not during a timeout ramp, which renders no target: a damper asked for there is never
+  // rendered (it was counted as dissipated all the same).
+  const Eigen::Vector3d damper_n =
+      safety_.stale() ? Eigen::Vector3d::Zero() : renderer_.PassivityDamper(command_n_, velocity_m_per_s, tick_s);
   Eigen::Vector3d rendered;
   // A local model changes the command every tick, and so does a damper; direct rendering
   // without one renders arrivals as they come (the safety filter holds them between arrivals).

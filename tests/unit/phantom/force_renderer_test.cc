@@ -440,6 +440,101 @@ TEST(ForceRenderer, TheLocalModelHoldsADelayedWallWhereDirectRenderingBounces) {
   }
 }
 
+// A server stall in a press, with the local model and the passivity controller (a helper
+// session's run, docs/network-haptics.md): the hand holds the device 8 mm into a 2000 N/m wall
+// (answers 5 ticks late); at 1.0 s the answers stop for 300 ms, so the timeout ramp lets the
+// device sink, and the returning wall pushes it out: energy the books see as a debt. At 2.5 s
+// the hand lifts the device 5 mm above the wall into free space.
+struct StallRun {
+  double energy_at_lift_j = 0;     // the controller's E when the lift starts
+  double damping_at_lift = 0;      // its α then, N s/m
+  double largest_free_force_n = 0; // |F| once the device is 1 mm above the wall
+  double max_unexplained_change_n = 0;
+  int reversals_in_hold = 0;       // 2.0-2.5 s, force changes > 0.05 N reversing
+  double energy_at_end_j = 0, damping_at_end = 0;  // at 4 s
+};
+
+StallRun RunServerStall(double debt_time_constant_s, bool passivity = true) {
+  RendererParameters parameters = LocalModel();
+  parameters.passivity = passivity;
+  parameters.local_model_passivity.debt_time_constant_s = debt_time_constant_s;
+  RenderChain chain(parameters, SafetyParameters{});
+  HandModel hand(HandParameters{}, Eigen::Vector3d(0, 0, 1e-3));
+  constexpr double kWallK = 2000.0;
+  constexpr int kDelay = 5;
+  std::deque<Eigen::Vector3d> poses(kDelay + 1, Eigen::Vector3d(0, 0, 1e-3));
+  StallRun run;
+  Eigen::Vector3d rendered = Eigen::Vector3d::Zero(), previous = rendered, previous_change = rendered;
+  for (int n = 0; n < 4000; ++n) {
+    const double t = n * kTick;
+    // Hand intent: down to -8 mm over 0.5 s, hold, up to +5 mm over 0.3 s from 2.5 s.
+    const double z_target = t < 0.5 ? 1e-3 - 18e-3 * t : t < 2.5 ? -8e-3 : t < 2.8 ? -8e-3 + 13e-3 * (t - 2.5) / 0.3 : 5e-3;
+    const double vz_target = t < 0.5 ? -18e-3 : t < 2.5 ? 0.0 : t < 2.8 ? 13e-3 / 0.3 : 0.0;
+    const Eigen::Vector3d previous_position = Quantize(hand.position_m());
+    hand.Step(Eigen::Vector3d(0, 0, z_target), Eigen::Vector3d(0, 0, vz_target), rendered, kTick);
+    const Eigen::Vector3d x = Quantize(hand.position_m()), v = hand.velocity_m_per_s();
+    poses.push_back(x);
+    poses.pop_front();
+    const Eigen::Vector3d& answered = poses.front();
+    const bool fresh = !(t >= 1.0 && t < 1.3);  // the server stalls for 300 ms
+    ReceivedModel model;
+    model.position_m = answered;
+    model.valid = answered.z() < 0;
+    model.stiffness_n_per_m = Eigen::Vector3d(0, 0, -kWallK).asDiagonal();
+    model.normal = Eigen::Vector3d::UnitZ();
+    model.surface_ahead = answered.z() >= 0;
+    model.surface_gap_m = std::max(answered.z(), 0.0);
+    model.surface_normal = Eigen::Vector3d::UnitZ();
+    const Eigen::Vector3d force(0, 0, answered.z() < 0 ? -kWallK * answered.z() : 0.0);
+    rendered = chain.Tick(fresh, force, model, x, v, t);
+    const Eigen::Vector3d change = rendered - previous;
+    if (!chain.safety().stale()) {
+      run.max_unexplained_change_n = std::max(run.max_unexplained_change_n,
+                                              change.norm() - 0.25 - 3000.0 * (x - previous_position).norm());
+    }
+    if (t >= 2.0 && t < 2.5 && change.norm() > 0.05 && previous_change.norm() > 0.05 && change.dot(previous_change) < 0) {
+      ++run.reversals_in_hold;
+    }
+    if (n == 2500) {
+      run.energy_at_lift_j = chain.renderer().passivity().energy_j();
+      run.damping_at_lift = chain.renderer().passivity().last_damping_n_s_per_m();
+    }
+    run.energy_at_end_j = chain.renderer().passivity().energy_j();
+    run.damping_at_end = chain.renderer().passivity().last_damping_n_s_per_m();
+    if (x.z() > 1e-3 && t > 2.5) run.largest_free_force_n = std::max(run.largest_free_force_n, rendered.norm());
+    previous_change = change;
+    previous = rendered;
+  }
+  return run;
+}
+
+TEST(ForceRenderer, AServerStallsPassivityDebtIsForgivenAndNeverDragsInFreeSpace) {
+  const StallRun kept = RunServerStall(std::numeric_limits<double>::infinity());
+  const double forgiving_s = PassivityRules::ForLocalModel().debt_time_constant_s;
+  const StallRun forgiven = RunServerStall(forgiving_s);
+  const StallRun plain = RunServerStall(forgiving_s, /*passivity=*/false);
+  std::printf("server stall: debt kept: E %.3g J at the lift, %.3g J at the end (alpha %.3g N s/m), free-space "
+              "force %.3g N, hold reversals %d; forgiven (0.5 s): E %.3g / %.3g J (alpha %.3g), free-space force "
+              "%.3g N, reversals %d; without the controller: reversals %d\n",
+              kept.energy_at_lift_j, kept.energy_at_end_j, kept.damping_at_end, kept.largest_free_force_n,
+              kept.reversals_in_hold, forgiven.energy_at_lift_j, forgiven.energy_at_end_j, forgiven.damping_at_end,
+              forgiven.largest_free_force_n, forgiven.reversals_in_hold, plain.reversals_in_hold);
+  // The stall leaves a debt a device held still cannot pay, kept to the end without forgiving.
+  EXPECT_LT(kept.energy_at_lift_j, -1e-3);
+  EXPECT_LT(kept.energy_at_end_j, -1e-3);
+  // Forgiven, the damper is off by the end (the first version damped at its cap to the end,
+  // with 0.8 N of drag in free space).
+  EXPECT_GT(forgiven.energy_at_end_j, 0.05 * kept.energy_at_end_j);
+  EXPECT_EQ(forgiven.damping_at_end, 0.0);
+  // And it does not buzz in the hold: at its cap on the hand's tremor the damper reversed the
+  // force tick to tick (163 times in 0.5 s; 0 without the controller).
+  EXPECT_LE(forgiven.reversals_in_hold, plain.reversals_in_hold + 5);
+  for (const StallRun* r : {&kept, &forgiven, &plain}) {
+    EXPECT_EQ(r->largest_free_force_n, 0.0) << "nothing in free space, debt or not";
+    EXPECT_LE(r->max_unexplained_change_n, 1e-9);
+  }
+}
+
 TEST(ForceRenderer, AStiffStickingContactDoesNotSoftenTheDelayedWall) {
   // The same wall, now sticking across at 8000 N/m (a bar clamped at both ends, sliding along
   // it), above the 3000 N/m cap. The first version capped the model by its stiffest direction,
