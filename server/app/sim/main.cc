@@ -333,7 +333,30 @@ int Run(const Options& options) {
   int fclib_written = 0;
   // The tool's translation per step: the scene's phases, or a file's rows (phase "file").
   std::vector<Eigen::Vector3d> file_points;
-  if (!options.trajectory_path.empty()) file_points = hapco::io::LoadTrajectoryCsv(options.trajectory_path, options.client_id);
+  // A file of stepped poses (a server's --trace, hapco-report --csv) carries the clients' pose
+  // sequences: the jump check scales with their gaps, as the server's did, and a sequence that
+  // starts again is a new session (a restarted client or server), which starts from the
+  // reference configuration as on a server. (With row numbers a replay refused poses the
+  // server had stepped: 16.9 N off; a helper session.)
+  std::vector<std::uint64_t> file_sequences;
+  std::vector<bool> file_session_starts;
+  if (!options.trajectory_path.empty()) {
+    hapco::io::TrajectoryFile file = hapco::io::LoadTrajectoryFile(options.trajectory_path, options.client_id);
+    file_points = std::move(file.points);
+    file_sequences = std::move(file.sequences);
+    file_session_starts = std::move(file.session_starts);
+    if (file.force_only_rows_skipped > 0) {
+      std::printf("note: %d rows of %s were written from a force alone (contacts_missing 1: the pose is not in the "
+                  "recording) and are skipped\n",
+                  file.force_only_rows_skipped, options.trajectory_path.c_str());
+    }
+    if (file.servers.size() > 1) {
+      std::printf("note: %s holds poses stepped by %zu servers (a failover or restart); each new session starts "
+                  "from the reference configuration here too\n",
+                  options.trajectory_path.c_str(), file.servers.size());
+    }
+  }
+  int sessions_in_file = 1;
   const int trajectory_steps = file_points.empty() ? scene.total_steps() : static_cast<int>(file_points.size()) - 1;
   auto translation_at = [&](int step) {
     return file_points.empty() ? scene.DeviceTranslationAtStep(step) : file_points[static_cast<std::size_t>(step)];
@@ -359,13 +382,20 @@ int Run(const Options& options) {
   std::map<std::string, int> ignored;
   for (int step = 1; step <= steps; ++step) {
     const Eigen::Vector3d pose_m = translation_at(step);
-    const hapco::sim::PoseVerdict verdict =
-        hapco::sim::CheckPose(pose_m, static_cast<std::uint64_t>(step), last_pose, options.limits);
+    std::uint64_t sequence = static_cast<std::uint64_t>(step);
+    if (!file_sequences.empty()) sequence = file_sequences[static_cast<std::size_t>(step)];
+    if (!file_session_starts.empty() && file_session_starts[static_cast<std::size_t>(step)]) {
+      ++sessions_in_file;
+      last_pose.reset();
+      session.Reset();
+      if (answerer) answerer.emplace(session, model_builder, options.multirate);
+    }
+    const hapco::sim::PoseVerdict verdict = hapco::sim::CheckPose(pose_m, sequence, last_pose, options.limits);
     if (verdict != hapco::sim::PoseVerdict::kAccept) {
       ++ignored[hapco::sim::VerdictName(verdict)];
       continue;
     }
-    last_pose = hapco::sim::AcceptedPose{static_cast<std::uint64_t>(step), pose_m};
+    last_pose = hapco::sim::AcceptedPose{sequence, pose_m};
     const int phase = file_points.empty() ? scene.PhaseOfStep(step) : 0;
     if (multirate) {
       // As hapco-server --physics-every: the pose may be answered by the last step's model.
@@ -443,6 +473,11 @@ int Run(const Options& options) {
   if (model.obstacle_surface().range_axis >= 0) {
     std::printf("compliance range %.3g m: %d steps needed a node pair beyond it%s\n", model.obstacle_surface().range_m,
                 out_of_range, out_of_range > 0 ? " (read as zero: raise contact.compliance_range_m)" : "");
+  }
+  if (sessions_in_file > 1) {
+    std::printf("%d sessions in %s (a server or a pose sequence starts again %d times): each started from the "
+                "reference configuration, as on a server\n",
+                sessions_in_file, options.trajectory_path.c_str(), sessions_in_file - 1);
   }
   if (!ignored.empty()) {
     std::string kinds;

@@ -7,7 +7,9 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <set>
 #include <string>
+#include <vector>
 
 #include "common/error.h"
 
@@ -64,6 +66,42 @@ TEST(TrajectoryFileTest, BadFilesNameTheLineAndTheFix) {
             std::string::npos);
   EXPECT_NE(ErrorOf(Write("short", "x_m,y_m,z_m\n0,0\n")).find(":2:"), std::string::npos);
   EXPECT_NE(ErrorOf(Write("empty", "x_m,y_m,z_m\n")).find("no trajectory rows"), std::string::npos);
+}
+
+TEST(TrajectoryFileTest, SteppedPoseFilesGiveTheirSequencesAndSkipForceOnlyRows) {
+  // A report CSV: pose sequences with gaps (poses the server ignored) and a restart (a second
+  // server), and a row written from a force alone (no pose recorded: dx written as 0).
+  const std::string path = Write("report",
+                                 "step,client_id,time_ns,dx_m,dy_m,dz_m,pose_sequence,contacts_missing,server_id\n"
+                                 "1,a,10,0,0,-0.0001,1,0,s1\n"
+                                 "2,a,20,0,0,-0.0005,4,0,s1\n"
+                                 "3,a,30,0,0,0,5,1,s1\n"
+                                 "1,a,40,0,0,-0.0004,2,0,s2\n");
+  const TrajectoryFile file = LoadTrajectoryFile(path, "a");
+  ASSERT_EQ(file.points.size(), 4u);
+  EXPECT_EQ(file.sequences, (std::vector<std::uint64_t>{0, 1, 4, 2}));
+  EXPECT_EQ(file.force_only_rows_skipped, 1);
+  EXPECT_EQ(file.servers, (std::set<std::string>{"s1", "s2"}));
+  EXPECT_EQ(file.session_starts, (std::vector<bool>{false, false, false, true}));
+  EXPECT_DOUBLE_EQ(file.points[3].z(), -0.0004);
+  // A trace names it `sequence`; files without one give none.
+  EXPECT_EQ(LoadTrajectoryFile(Write("trace_seq", "client_id,sequence,x_m,y_m,z_m\na,7,0,0,0\n"), "a").sequences,
+            (std::vector<std::uint64_t>{0, 7}));
+  EXPECT_TRUE(LoadTrajectoryFile(Write("noseq", "dx_m,dy_m,dz_m\n0,0,0\n")).sequences.empty());
+  EXPECT_NE(ErrorOf(Write("badseq", "sequence,x_m,y_m,z_m\nx,0,0,0\n")).find(":2: expected a pose sequence"),
+            std::string::npos);
+}
+
+TEST(TrajectoryFileTest, SpreadsheetFilesAndAmbiguousHeaders) {
+  // "CSV UTF-8" starts with a byte-order mark; '#' lines are comments.
+  const auto points = LoadTrajectoryCsv(Write("bom", "\xEF\xBB\xBF# from a spreadsheet\ndx_m,dy_m,dz_m\n0,0,-0.001\n"));
+  ASSERT_EQ(points.size(), 2u);
+  EXPECT_DOUBLE_EQ(points[1].z(), -0.001);
+  EXPECT_NE(ErrorOf(Write("semicolon", "dx_m;dy_m;dz_m\n0;0;0\n")).find("separated by commas"), std::string::npos);
+  EXPECT_NE(ErrorOf(Write("both", "x_m,y_m,z_m,dx_m,dy_m,dz_m\n0,0,0,0,0,0\n")).find("both x_m,y_m,z_m and dx_m"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf(Write("noclient", "dx_m,dy_m,dz_m\n0,0,0\n"), "zed").find("has no client_id column"),
+            std::string::npos);
 }
 
 }  // namespace
