@@ -21,6 +21,7 @@
 #include <memory>
 #include <set>
 #include <string>
+#include <vector>
 
 #include "cli/command_line.h"
 #include "cli/run_main.h"
@@ -56,7 +57,11 @@ constexpr int32_t kStatusDepth = 16;
 // Forces waiting for their frame, per client: beyond this (frames stopped arriving) the
 // oldest is written on its own.
 constexpr std::size_t kMaxPendingForces = 4096;
-constexpr uint64_t kLateWindow = 64;
+// The pose sequences of the frames recorded last, per client: a force whose frame is among
+// them is a late duplicate. 8192 (8 s at 1 kHz) covers the reader histories' 1 s of slack
+// with room; a window of 64 sequences took the forces of a recorder stalled 300 ms for a
+// restarted client's and wrote 35-386 steps twice, out of order (a helper session).
+constexpr uint64_t kRecordedRing = 8192;
 
 struct Options {
   std::string output, scene_path, security_dir, ready_file;
@@ -125,13 +130,16 @@ void Set(hapco::recording::Vec3* out, const hapco_idl_Vec3& v) {
 struct ClientState {
   std::string client_id;
   bool have_frame = false;
-  uint64_t last_step = 0, last_frame_sequence = 0;
+  uint64_t last_step = 0;
   std::deque<hapco_idl_FeedbackForce> pending;
   // The newest server_send_ns of a frame recorded in this stream (the server's monotonic
   // clock, stamped once per step: its frames of later steps, in any session, are strictly
   // newer; -1: none yet). Not server_receive_ns: poses recovered from a later pose's
   // history are stepped one after another with that pose's receive time.
   int64_t newest_send_ns = -1;
+  // recorded_frames[s % kRecordedRing] == s: the frame of pose sequence s (of this session)
+  // is in the recording.
+  std::vector<uint64_t> recorded_frames;
 };
 
 class Recorder {
@@ -149,10 +157,10 @@ class Recorder {
     }
     ++forces_seen_;
     ClientState& c = StateOf(force.client_id, force.server_id);
-    // Arrived after its frame (recorded already): a sequence at most kLateWindow below the
-    // last frame's. Further below is a restarted client's new sequence, kept.
-    if (c.have_frame && force.pose_sequence <= c.last_frame_sequence &&
-        c.last_frame_sequence - force.pose_sequence < kLateWindow) {
+    // Arrived after its frame, which is recorded already (a restarted client's new
+    // sequence, whose frames are not, is kept).
+    if (c.have_frame && force.pose_sequence != 0 && !c.recorded_frames.empty() &&
+        c.recorded_frames[force.pose_sequence % kRecordedRing] == force.pose_sequence) {
       return;
     }
     c.pending.push_back(force);
@@ -214,9 +222,11 @@ class Recorder {
       c.pending.pop_front();
     }
     if (matched) c.pending.pop_front();
+    if (c.recorded_frames.empty()) c.recorded_frames.assign(kRecordedRing, 0);
+    if (new_session) std::fill(c.recorded_frames.begin(), c.recorded_frames.end(), 0);
+    c.recorded_frames[frame.pose_sequence % kRecordedRing] = frame.pose_sequence;
     c.have_frame = true;
     c.last_step = frame.step;
-    c.last_frame_sequence = frame.pose_sequence;
     WriteFrameStep(frame);
   }
 

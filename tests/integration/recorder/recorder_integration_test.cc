@@ -4,11 +4,14 @@
 // No sleeps: waits are process exits (pidfd), and file growth / output text seen through
 // inotify, all bounded.
 #include <array>
+#include <chrono>
+#include <csignal>
 #include <cmath>
 #include <cstdint>
 #include <filesystem>
 #include <sstream>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "io/recording.h"
@@ -182,6 +185,52 @@ TEST(RecorderProcess, RecordingHoldsExactlyTheServersSteps) {
     ++rows;
   }
   EXPECT_EQ(rows, steps.size());
+}
+
+// A recorder stalled three times for 300 ms mid-run (a descheduled process, a slow disk):
+// when it resumes its readers hand it a backlog of frames and forces; forces whose frames it
+// has just recorded are late duplicates, not new steps. With a 64-sequence window it took
+// them for a restarted client's and wrote 35-386 steps twice, numbered out of order (a helper
+// session; 3 runs of 3). The recording must hold exactly the server's steps, once each.
+TEST(RecorderProcess, AStalledRecorderRecordsEveryStepOnce) {
+  const std::string dir = TestDir();
+  const std::string domain = std::to_string(SetUpTestDomain());
+  const std::string file = dir + "/run.hapcorec";
+  Process server({HAPCO_SERVER_EXE, kScene, "--domain", domain, "--status-period-s", "0.2", "--trace",
+                  dir + "/trace.csv", "--quiet"},
+                 dir + "/server.out", dir + "/server.err");
+  std::unique_ptr<Process> recorder;
+  ASSERT_NO_FATAL_FAILURE(StartRecorder(&recorder, dir, domain, file));
+  {
+    Process phantom({HAPCO_PHANTOM_EXE, kScene, "--client-id", "phantom-1", "--domain", domain,
+                     "--connect-timeout-s", "60", "--duration-s", "3"},
+                    dir + "/phantom.out", dir + "/phantom.err");
+    // Once the server is stepping (its trace has rows), stall the recorder three times.
+    for (int k = 0; k < 600 && ReadFile(dir + "/trace.csv").size() < 2000; ++k) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));  // polling the trace, not a wait
+    }
+    for (int stall = 0; stall < 3; ++stall) {
+      recorder->Signal(SIGSTOP);
+      std::this_thread::sleep_for(std::chrono::milliseconds(300));  // the stall itself
+      recorder->Signal(SIGCONT);
+      std::this_thread::sleep_for(std::chrono::milliseconds(300));
+    }
+    ASSERT_EQ(phantom.Wait(120'000), 0) << ReadFile(dir + "/phantom.err");
+  }
+  server.Signal(SIGTERM);
+  ASSERT_EQ(server.Wait(30'000), 0) << ReadFile(dir + "/server.err");
+  recorder->Signal(SIGTERM);
+  ASSERT_EQ(recorder->Wait(30'000), 0) << ReadFile(dir + "/recorder.err");
+  const std::vector<TraceRow> trace = ReadTrace(dir + "/trace.csv");
+  ASSERT_GE(trace.size(), 1000u);
+  io::RecordingReadReport report;
+  const std::vector<recording::Step> steps = StepsOf(io::ReadRecording(file, &report));
+  std::printf("%zu steps stepped, %zu recorded\n%s", trace.size(), steps.size(), ReadFile(dir + "/recorder.out").c_str());
+  ASSERT_EQ(steps.size(), trace.size());
+  for (std::size_t i = 0; i < steps.size(); ++i) {
+    ASSERT_EQ(steps[i].step(), i + 1) << "each step once, in order";
+    ExpectSameStep(steps[i], trace[i]);
+  }
 }
 
 // (b) A recorder killed with SIGKILL mid-run: the file reads, every record up to the last
