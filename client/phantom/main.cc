@@ -14,6 +14,7 @@
 #include "cli/command_line.h"
 #include "cli/run_main.h"
 #include "common/error.h"
+#include "common/output_file.h"
 #include "common/realtime.h"
 #include "common/statistics.h"
 #include "io/scene_file.h"
@@ -169,7 +170,13 @@ int Run(const Options& o) {
       },
       [&o](const std::string& line) { std::fprintf(stderr, "hapco-phantom %s: %s\n", o.client_id.c_str(), line.c_str()); });
   client.Leave();
-  if (csv != nullptr) std::fclose(csv);
+  // After the summary: a run whose CSV could not be written still says what it did.
+  std::string csv_error;
+  try {
+    CloseOutputFile(csv, o.csv_path);
+  } catch (const InputError& error) {
+    csv_error = error.what();
+  }
 
   const phantom::ClientStats& s = client.stats();
   std::printf("hapco-phantom %s: %d ticks, %llu poses, %llu forces received%s\n"
@@ -217,6 +224,10 @@ int Run(const Options& o) {
     std::printf("  start-up: connected after %.3f s, first force %.3f s after start\n",
                 static_cast<double>(connected_ns - start_ns) * 1e-9,
                 static_cast<double>(s.first_force_arrival_ns - start_ns) * 1e-9);
+  }
+  if (!csv_error.empty()) {
+    std::fprintf(stderr, "hapco-phantom: %s\n", csv_error.c_str());
+    return 1;
   }
   return 0;
 }

@@ -11,6 +11,7 @@
 #include "cli/command_line.h"
 #include "cli/run_main.h"
 #include "common/error.h"
+#include "common/output_file.h"
 #include "common/statistics.h"
 #include "io/recording.h"
 #include "io/recording_sessions.h"
@@ -235,7 +236,7 @@ int Run(const Options& options) {
                    static_cast<unsigned long long>(s->pose_sequence()),
                    s->server_time_s(), s->contacts_missing() ? 1 : 0, s->contacts_size(), s->server_id().c_str());
     }
-    std::fclose(csv);
+    hapco::CloseOutputFile(csv, csv_path);
     std::printf("csv        %s\n", csv_path.c_str());
   }
   if (!plots_dir.empty()) {

@@ -1,6 +1,7 @@
 // hapco-server: the haptic service. Loads one or more scenes (each TwoBodyModel is shared by
 // its sessions), serves any number of clients over DDS (one TwoBodySession each), one step
 // per pose. Thin: the work is in hapco::service::ServerLoop and Session.
+#include <cerrno>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -14,6 +15,7 @@
 #include "cli/command_line.h"
 #include "cli/run_main.h"
 #include "common/error.h"
+#include "common/output_file.h"
 #include "common/realtime.h"
 #include "common/work_pool.h"
 #include "common/stop_signals.h"
@@ -195,6 +197,9 @@ int Run(const Options& options) {
     // published: a server killed mid-run (a host gone) leaves a trace of every force it sent.
     std::setvbuf(trace.get(), nullptr, _IOLBF, 1024);
     std::fprintf(trace.get(), "client_id,sequence,x_m,y_m,z_m,fx_n,fy_n,fz_n,step_us\n");
+    if (std::fflush(trace.get()) != 0 || std::ferror(trace.get()) != 0) {
+      throw hapco::InputError("cannot write " + options.trace_path + ": " + std::strerror(errno) + " (disk full?)");
+    }
     server_options.trace = trace.get();
   }
   hapco::UseRealtimePriority(options.rt_priority, "hapco-server");
@@ -217,6 +222,8 @@ int Run(const Options& options) {
   server.Run();
   std::printf("%s; stopped by %s\n", server.Summary().c_str(),
               stop_signals.ReceivedName("request"));
+  // A trace that lost rows (the disk filled up mid-run) is not a complete record: say so.
+  hapco::CloseOutputFile(trace.release(), options.trace_path);
   return 0;
 }
 

@@ -3,6 +3,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <cerrno>
 #include <cstring>
 #include <chrono>
 #include <filesystem>
@@ -223,14 +224,17 @@ hapco::recording::Step MakeStepRecord(const hapco::sim::StepOutput& out, int pha
 // An output written under PATH.partial and moved onto PATH only when the run completes, so that
 // a run that fails leaves the user's existing file as it was. A partial CSV is removed; a
 // partial recording is kept (nothing recorded is thrown away) under its .partial name.
+// An existing PATH that is not a regular file (/dev/null, a FIFO, /dev/stdout) is written
+// directly: the rename replaced the device node with a regular file (run as root, a helper
+// session's `--csv /dev/full` left /dev/full and /dev/null regular files).
 class PendingOutput {
  public:
   PendingOutput(std::string path, bool keep_partial_on_failure)
-      : path_(std::move(path)), partial_(path_.empty() ? "" : path_ + ".partial"), keep_(keep_partial_on_failure) {}
+      : path_(std::move(path)), partial_(PartialPathFor(path_)), keep_(keep_partial_on_failure) {}
   PendingOutput(const PendingOutput&) = delete;
   PendingOutput& operator=(const PendingOutput&) = delete;
   ~PendingOutput() {
-    if (path_.empty() || committed_) return;
+    if (path_.empty() || committed_ || partial_ == path_) return;
     std::error_code error;
     if (!keep_) {
       std::filesystem::remove(partial_, error);
@@ -241,7 +245,10 @@ class PendingOutput {
   }
   const std::string& partial() const { return partial_; }
   void Commit() {
-    if (path_.empty()) return;
+    if (path_.empty() || partial_ == path_) {
+      committed_ = true;
+      return;
+    }
     std::error_code error;
     std::filesystem::rename(partial_, path_, error);
     if (error) throw hapco::InputError("cannot move " + partial_ + " to " + path_ + ": " + error.message());
@@ -249,6 +256,13 @@ class PendingOutput {
   }
 
  private:
+  static std::string PartialPathFor(const std::string& path) {
+    if (path.empty()) return "";
+    std::error_code error;
+    const auto status = std::filesystem::status(path, error);
+    if (!error && std::filesystem::exists(status) && !std::filesystem::is_regular_file(status)) return path;
+    return path + ".partial";
+  }
   std::string path_, partial_;
   bool keep_;
   bool committed_ = false;
@@ -450,7 +464,9 @@ int Run(const Options& options) {
     }
   }
   if (progress) std::fputc('\n', stderr);
-  if (csv != nullptr && std::fflush(csv) != 0) throw hapco::InputError("cannot write " + csv_output.partial());
+  if (csv != nullptr && (std::fflush(csv) != 0 || std::ferror(csv) != 0)) {
+    throw hapco::InputError("cannot write " + csv_output.partial() + ": " + std::strerror(errno) + " (disk full?)");
+  }
   csv_output.Commit();
   if (recorder) {
     const long long records = static_cast<long long>(recorder->records_written());
