@@ -472,6 +472,27 @@ const StepOutput& TwoBodySession::Step(const Eigen::Vector3d& device_translation
   if (!device_translation_m.allFinite()) {
     throw InputError("device translation must be finite");
   }
+  if (output_.step > 0 || !model_.ToolInsideBeyondReach(device_translation_m, max_new_depth_obstacle_m_)) {
+    return StepOnce(device_translation_m);
+  }
+  constexpr double kApartStepM = 1e-3, kContactStepM = 2.5e-4;
+  int approach_steps = 0;
+  Eigen::Vector3d at = device_translation_m_;
+  for (;;) {
+    const double step_m = output_.num_contacts > 0 ? kContactStepM : kApartStepM;
+    const Eigen::Vector3d left = device_translation_m - at;
+    if (left.norm() <= step_m) break;
+    at += left * (step_m / left.norm());
+    StepOnce(at);
+    output_.step = 0;  // the approach is not the session's steps
+    ++approach_steps;
+  }
+  StepOnce(device_translation_m);
+  output_.approach_steps = approach_steps;
+  return output_;
+}
+
+const StepOutput& TwoBodySession::StepOnce(const Eigen::Vector3d& device_translation_m) {
   Stopwatch total;
   const int step = output_.step + 1;
   output_ = StepOutput{};

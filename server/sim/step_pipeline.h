@@ -89,6 +89,7 @@ struct StepOutput {
   // Banded obstacle compliance (SceneSpec::compliance_range_m): the step needed a node pair
   // beyond the range, which reads as zero (raise the range). Always false when dense.
   bool compliance_out_of_range = false;
+  int approach_steps = 0;  // steps run from home before this one (a first pose deep inside; Step)
   double detect_seconds = 0.0;    // broad phase (incl. the obstacle displacement there) + both passes
   double assemble_seconds = 0.0;  // ũ and W
   double solve_seconds = 0.0;
@@ -119,6 +120,12 @@ class TwoBodySession {
   const TwoBodyModel& model() const { return model_; }
 
   // Runs one step for the device translation d (m, from the device's home position).
+  // A session's first step at a pose deeper inside the obstacle than detection looks for a
+  // new contact (TwoBodyModel::ToolInsideBeyondReach) first approaches it from home in small
+  // steps (1 mm apart, 0.25 mm in contact; not counted in `step`): a client resumed mid-press
+  // on another server, 11 mm into benchmark 1's bar, found no contact and got 0 N until it
+  // had lifted to 1 mm (a helper session). The approach is a straight line from home, so it
+  // carries that path's friction history; it runs only when the direct step would find nothing.
   const StepOutput& Step(const Eigen::Vector3d& device_translation_m);
 
   // Solver choice and parameters, initialised from the scene; change them between steps.
@@ -148,6 +155,7 @@ class TwoBodySession {
   void NodalContactForces(Eigen::VectorXd* obstacle_n, Eigen::VectorXd* tool_n) const;
 
  private:
+  const StepOutput& StepOnce(const Eigen::Vector3d& device_translation_m);
   void BroadPhase(const Eigen::Vector3d& increment_m);
   // U = C f of the last forces on the region slots (kPrecomputed).
   void ObstacleDisplacementOnRegion();

@@ -368,6 +368,33 @@ TEST(FreeInteractionTest, AFastLiftKeepsTheContactAndTheForceOfASlowOne) {
   }
 }
 
+// A session whose first pose is deeper in the bar than detection looks for a new contact (a
+// client resumed mid-press on another server after a failover): it is approached from home
+// and gives the force of a gradual press (it gave 0 N until the tool had lifted to 1 mm: a
+// helper session, benchmark 1 at 11 mm). A first pose beside the bar, below its top, touches
+// nothing and is stepped directly.
+TEST(FreeInteractionTest, ASessionOpenedDeepInsideIsApproachedFromHome) {
+  const TwoBodyModel model(BarScene(/*clamp_both_ends=*/true));
+  const Eigen::Vector3d deep(0, 0, -0.012);  // 12 mm into the 20 mm bar: detection reaches 9 mm
+  TwoBodySession gradual(model);
+  Eigen::Vector3d pressed_n = Eigen::Vector3d::Zero();
+  for (const Eigen::Vector3d& d : PolylinePath({{0, 0, 0}, deep}, 1e-4)) pressed_n = gradual.Step(d).contact_force_n;
+  TwoBodySession opened(model);
+  const StepOutput& first = opened.Step(deep);
+  std::printf("first pose 12 mm deep: %.3f N after %d approach steps; gradual press %.3f N\n",
+              first.contact_force_n.norm(), first.approach_steps, pressed_n.norm());
+  EXPECT_EQ(first.step, 1) << "the approach is not counted as the session's steps";
+  EXPECT_GT(first.approach_steps, 10);
+  EXPECT_EQ(first.status, contact::SolverStatus::kConverged);
+  EXPECT_GT(pressed_n.z(), 10.0);
+  EXPECT_LT((first.contact_force_n - pressed_n).norm(), 0.02 * pressed_n.norm());
+  // Beside the bar (y beyond its side), 5 mm below its top: nothing there.
+  TwoBodySession beside(model);
+  const StepOutput& apart = beside.Step(Eigen::Vector3d(0, 0.025, -0.005));
+  EXPECT_EQ(apart.approach_steps, 0);
+  EXPECT_EQ(apart.num_contacts, 0);
+}
+
 // The broad phase evaluates the obstacle only near the tool: the full-solve mode (no broad
 // phase, per-step sparse solves) must give the same forces on paths that use every face
 // kind and both passes, to round-off.
