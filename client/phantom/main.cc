@@ -29,7 +29,7 @@ constexpr const char* kDescription =
     R"(A simulated haptic device that drives a hapco-server session at 1 kHz: every tick it publishes the device's pose, takes the newest force (never waiting) and renders it through the safety filter. It counts missed ticks, stale-force ticks and the round trip of each force, and prints a summary at the end. Guide: docs/haptic-service.md.)";
 
 constexpr const char* kFooter =
-    R"(Safety (every tick): a NaN/Inf force is never rendered (the last good one is kept), the magnitude is clamped to 7.9 N, the change per tick is limited to 0.25 N (250 N/s) plus, with a local model, what a spring of the model stiffness cap (3000 N/m by default) gives for the device's own motion that tick (a wall pushes back as fast as it is entered); no force is rendered for longer than 50 ms without news, it ramps to zero.
+    R"(Safety (every tick): a NaN/Inf force is never rendered (the last good one is kept), the magnitude is clamped to 7.9 N, the change per tick is limited to 0.25 N (250 N/s) plus, with a local model, what a spring of the model stiffness cap (3000 N/m by default) gives for the device's own motion that tick (a wall pushes back as fast as it is entered); after 50 ms without a new force it ramps to zero.
 SIGINT/SIGTERM: the run stops, the session is left and the summary printed.
 Exit code: 0 done, 1 bad input, 2 no server found, 3 DDS failure.)";
 

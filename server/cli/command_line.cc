@@ -339,7 +339,8 @@ void CommandLine::AddRendering(std::string* mode, double* max_model_stiffness_n_
             "force at the device's current position every tick (in contact the contact's plane, with "
             "friction on the device; apart the obstacle surface ahead); +passivity: a time-domain passivity "
             "controller on what is rendered, a damper of at most 25 N s/m within the 0.25 N/tick rate limit (the "
-            "energy it dissipates is reported). auto (default): direct "
+            "energy it dissipates is reported; direct+passivity suits round trips of a few ms only: from 50 ms it oscillates, "
+            "docs/network-haptics.md). auto (default): direct "
             "with --mode kinematic (forces compare with hapco-sim), local-model+passivity with --mode hand "
             "(passive and without oscillation up to a 200 ms round trip and 10 % loss, "
             "docs/network-haptics.md)",

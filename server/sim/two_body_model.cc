@@ -626,6 +626,17 @@ std::string StartingPositionNote(const TwoBodyModel& model) {
   return note.str();
 }
 
+std::string ReachNote(const TwoBodyModel& model, double device_reach_m, const std::string& what) {
+  const double reach_m = model.scene().reach_m;
+  if (!(device_reach_m > reach_m)) return "";
+  std::ostringstream note;
+  note << "the device may move " << device_reach_m * 1e3 << " mm from its start (" << what << "), beyond the scene's "
+       << "contact.reach_m = " << reach_m * 1e3 << " mm: obstacle faces farther than that from the tool's start are "
+       << "no contact candidates, and the tool passes through them there; raise contact.reach_m to at least "
+       << device_reach_m << " m";
+  return note.str();
+}
+
 std::string ContactGroupsNote(const TwoBodyModel& model) {
   const TwoBodyModelStats& stats = model.stats();
   if (stats.faces_in_reach_without_contact <= 0) return "";

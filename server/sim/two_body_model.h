@@ -193,4 +193,11 @@ std::string StartingPositionNote(const TwoBodyModel& model);
 // 4 mm contact disc: 0 N while 0.3 mm deep).
 std::string ContactGroupsNote(const TwoBodyModel& model);
 
+// A note when the device may move farther from its start (device_reach_m, m: the server's
+// --workspace-m, or the farthest pose of a trajectory; `what` names it) than the scene's
+// contact.reach_m: obstacle faces beyond reach_m of the tool's start are no contact candidates,
+// so the tool passes through them there (a helper session's reach_m 5 mm scene slid 28 mm:
+// 13.1 N where 41.0 N is right, without a word). Empty otherwise.
+std::string ReachNote(const TwoBodyModel& model, double device_reach_m, const std::string& what);
+
 }  // namespace hapco::sim

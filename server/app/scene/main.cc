@@ -17,6 +17,7 @@
 #include "io/scene_file.h"
 #include "io/scene_model.h"
 #include "sim/compliance_kernels.h"
+#include "sim/pose_limits.h"
 #include "sim/scene.h"
 #include "sim/two_body_model.h"
 
@@ -167,7 +168,12 @@ int Run(const Options& options) {
     std::printf("          the step reads them with the %s compliance kernels (this CPU's fastest; "
                 "sim/compliance_kernels.h)\n",
                 hapco::sim::ComplianceKernelName(hapco::sim::FastestComplianceKernel()));
-    for (const std::string& note : {hapco::sim::StartingPositionNote(model), hapco::sim::ContactGroupsNote(model)}) {
+    double farthest_m = 0.0;
+    for (const Eigen::Vector3d& d : scene.DeviceTrajectory()) farthest_m = std::max(farthest_m, d.norm());
+    for (const std::string& note : {hapco::sim::StartingPositionNote(model), hapco::sim::ContactGroupsNote(model),
+                                    hapco::sim::ReachNote(model, farthest_m, "the scene's trajectory"),
+                                    hapco::sim::ReachNote(model, hapco::sim::PoseLimits{}.workspace_m,
+                                                          "hapco-server's default --workspace-m")}) {
       if (!note.empty()) std::printf("note      %s\n", note.c_str());
     }
   }

@@ -181,7 +181,8 @@ int Run(const Options& options) {
       std::fflush(stdout);
     }
     for (const std::string& note :
-         {hapco::sim::StartingPositionNote(*models.back()), hapco::sim::ContactGroupsNote(*models.back())}) {
+         {hapco::sim::StartingPositionNote(*models.back()), hapco::sim::ContactGroupsNote(*models.back()),
+          hapco::sim::ReachNote(*models.back(), options.server.limits.workspace_m, "--workspace-m")}) {
       if (!note.empty()) std::printf("hapco-server: scene %s: note: %s\n", models.back()->scene().name.c_str(), note.c_str());
     }
     scenes_line += (scenes_line.empty() ? "" : ", ") + models.back()->scene().name + " (" +

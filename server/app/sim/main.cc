@@ -379,6 +379,12 @@ int Run(const Options& options) {
     return file_points.empty() ? scene.trajectory[static_cast<std::size_t>(phase)].name : "file";
   };
   const int steps = options.steps > 0 ? std::min(options.steps, trajectory_steps) : trajectory_steps;
+  {
+    double farthest_m = 0.0;
+    for (int step = 1; step <= steps; ++step) farthest_m = std::max(farthest_m, translation_at(step).norm());
+    const std::string note = hapco::sim::ReachNote(model, farthest_m, "the trajectory's farthest pose");
+    if (!note.empty()) std::printf("note: %s\n", note.c_str());
+  }
   int not_converged = 0;
   int out_of_range = 0;  // steps that needed a node pair beyond a banded compliance
   double peak_force_n = 0;
@@ -504,6 +510,13 @@ int Run(const Options& options) {
     }
     std::printf("%d poses ignored as hapco-server would (--workspace-m %.3g, --max-jump-m %.3g): %s\n", total,
                 options.limits.workspace_m, options.limits.max_jump_m, kinds.c_str());
+    // Most poses outside the workspace: a file in millimetres is the usual cause.
+    const auto out = ignored.find(hapco::sim::VerdictName(hapco::sim::PoseVerdict::kOutOfWorkspace));
+    if (out != ignored.end() && 2 * out->second > steps) {
+      std::printf("note: %d of the %d poses lie outside the workspace: the trajectory's columns are metres (a file "
+                  "in millimetres reads 1000 times too far)\n",
+                  out->second, steps);
+    }
   }
   return not_converged > 0 ? 2 : 0;
 }

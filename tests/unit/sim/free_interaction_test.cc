@@ -395,6 +395,20 @@ TEST(FreeInteractionTest, ASessionOpenedDeepInsideIsApproachedFromHome) {
   EXPECT_EQ(apart.num_contacts, 0);
 }
 
+// A scene whose contact.reach_m is shorter than where the device may go says so (the tool
+// passes through faces beyond it: a helper session's 5 mm reach slid 28 mm, 13.1 N where
+// 41.0 N is right, without a word).
+TEST(FreeInteractionTest, AReachShorterThanTheDevicesIsNoted) {
+  SceneSpec scene = BarScene(/*clamp_both_ends=*/true);
+  scene.reach_m = 0.005;
+  const TwoBodyModel model(scene);
+  const std::string note = ReachNote(model, 0.03, "the trajectory's farthest pose");
+  EXPECT_NE(note.find("30 mm from its start (the trajectory's farthest pose)"), std::string::npos) << note;
+  EXPECT_NE(note.find("contact.reach_m = 5 mm"), std::string::npos) << note;
+  EXPECT_EQ(ReachNote(model, 0.004, "x"), "");
+  EXPECT_EQ(ReachNote(TwoBodyModel(BarScene(true)), 0.1, "--workspace-m"), "") << "the defaults agree";
+}
+
 // The broad phase evaluates the obstacle only near the tool: the full-solve mode (no broad
 // phase, per-step sparse solves) must give the same forces on paths that use every face
 // kind and both passes, to round-off.
