@@ -86,7 +86,8 @@ bool Parse(int argc, char** argv, Options* o) {
 
 // Trajectory points 0..N (point 0 = start), m.
 std::vector<Eigen::Vector3d> LoadTrajectory(const Options& o, const hapco::sim::SceneSpec& scene) {
-  if (o.trajectory != "scene") return hapco::io::LoadTrajectoryCsv(o.trajectory);
+  // A trace of several clients gives this device's own rows (its --client-id).
+  if (o.trajectory != "scene") return hapco::io::LoadTrajectoryCsv(o.trajectory, o.client_id, /*client_id_if_listed=*/true);
   return scene.DeviceTrajectory();
 }
 

@@ -164,7 +164,16 @@ TrajectoryFile LoadTrajectoryFile(const std::string& path, const std::string& cl
   return ReadTrajectoryCsv(in, path, client_id);
 }
 
-std::vector<Eigen::Vector3d> LoadTrajectoryCsv(const std::string& path, const std::string& client_id) {
+std::vector<Eigen::Vector3d> LoadTrajectoryCsv(const std::string& path, const std::string& client_id,
+                                               bool client_id_if_listed) {
+  if (client_id_if_listed && !client_id.empty()) {
+    std::ifstream in(path);
+    if (!in) throw InputError("cannot read trajectory " + path);
+    std::string header;
+    std::getline(in, header);
+    if (header.rfind("\xEF\xBB\xBF", 0) == 0) header.erase(0, 3);
+    if (Find(SplitCsv(header), "client_id") < 0) return LoadTrajectoryFile(path, "").points;
+  }
   return LoadTrajectoryFile(path, client_id).points;
 }
 

@@ -41,7 +41,11 @@ TrajectoryFile LoadTrajectoryFile(const std::string& path, const std::string& cl
 // the file has a client_id column, `client_id` selects that client's rows (required when the
 // file holds several clients). Throws InputError with FILE:LINE for a malformed or non-finite
 // row, a header without position columns (naming the accepted ones), or a file without rows.
-std::vector<Eigen::Vector3d> LoadTrajectoryCsv(const std::string& path, const std::string& client_id = "");
+// client_id_if_listed: a file without a client_id column is read whole (hapco-phantom passes
+// its own --client-id, which then picks its rows from a multi-client trace); otherwise a
+// client id given for such a file is an error.
+std::vector<Eigen::Vector3d> LoadTrajectoryCsv(const std::string& path, const std::string& client_id = "",
+                                               bool client_id_if_listed = false);
 
 // Same, from text already in memory; `source_name` is used in messages (the fuzz harness).
 std::vector<Eigen::Vector3d> ParseTrajectoryCsv(const std::string& text, const std::string& source_name,

@@ -102,6 +102,10 @@ TEST(TrajectoryFileTest, SpreadsheetFilesAndAmbiguousHeaders) {
             std::string::npos);
   EXPECT_NE(ErrorOf(Write("noclient", "dx_m,dy_m,dz_m\n0,0,0\n"), "zed").find("has no client_id column"),
             std::string::npos);
+  // hapco-phantom's own client id picks its rows where the file lists clients, else all rows.
+  EXPECT_EQ(LoadTrajectoryCsv(Write("noclient2", "dx_m,dy_m,dz_m\n0,0,0\n"), "zed", true).size(), 2u);
+  EXPECT_EQ(LoadTrajectoryCsv(Write("two", "client_id,x_m,y_m,z_m\na,0,0,0\nb,1e-3,0,0\nb,2e-3,0,0\n"), "b", true).size(),
+            3u);
 }
 
 }  // namespace
