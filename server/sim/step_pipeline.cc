@@ -1,6 +1,7 @@
 #include "sim/step_pipeline.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 
@@ -472,20 +473,45 @@ const StepOutput& TwoBodySession::Step(const Eigen::Vector3d& device_translation
   if (!device_translation_m.allFinite()) {
     throw InputError("device translation must be finite");
   }
-  if (output_.step > 0 || !model_.ToolInsideBeyondReach(device_translation_m, max_new_depth_obstacle_m_)) {
+  if (output_.step > 0 || device_translation_m.norm() <= kDirectFirstStepM ||
+      !model_.ToolInsideObstacle(device_translation_m)) {
     return StepOnce(device_translation_m);
   }
-  constexpr double kApartStepM = 1e-3, kContactStepM = 2.5e-4;
+  // Where the device came from is unknown. The approach presses in along the start's contact
+  // normal n, as a user meets a surface: lift 1 mm off it, move across above it, press to the
+  // pose (with friction; a straight line from home dragged the tool sideways into the bar and
+  // gave side forces of the wrong sign, and a frictionless one lost the sticking contacts'
+  // share of the normal force: 2-3 % mid-span, 46 % next to a clamp; a helper session).
+  constexpr double kApartStepM = 1e-3, kContactStepM = 1e-4, kLiftM = 1e-3;
+  const Eigen::Vector3d& n = model_.approach_normal();
+  std::array<Eigen::Vector3d, 3> waypoints;
+  int num_waypoints = 0;
+  if (n.norm() > 0) {
+    const Eigen::Vector3d across = device_translation_m - n * n.dot(device_translation_m);
+    waypoints[num_waypoints++] = kLiftM * n;
+    waypoints[num_waypoints++] = across + kLiftM * n;
+  }
+  waypoints[num_waypoints++] = device_translation_m;
   int approach_steps = 0;
   Eigen::Vector3d at = device_translation_m_;
-  for (;;) {
-    const double step_m = output_.num_contacts > 0 ? kContactStepM : kApartStepM;
-    const Eigen::Vector3d left = device_translation_m - at;
-    if (left.norm() <= step_m) break;
-    at += left * (step_m / left.norm());
-    StepOnce(at);
-    output_.step = 0;  // the approach is not the session's steps
-    ++approach_steps;
+  for (int w = 0; w < num_waypoints; ++w) {
+    for (;;) {
+      const double step_m = output_.num_contacts > 0 ? kContactStepM : kApartStepM;
+      const Eigen::Vector3d left = waypoints[static_cast<std::size_t>(w)] - at;
+      if (left.norm() <= step_m) {
+        if (w + 1 < num_waypoints) {
+          at = waypoints[static_cast<std::size_t>(w)];
+          StepOnce(at);
+          output_.step = 0;
+          ++approach_steps;
+        }
+        break;
+      }
+      at += left * (step_m / left.norm());
+      StepOnce(at);
+      output_.step = 0;  // the approach is not the session's steps
+      ++approach_steps;
+    }
   }
   StepOnce(device_translation_m);
   output_.approach_steps = approach_steps;

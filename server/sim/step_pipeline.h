@@ -120,12 +120,14 @@ class TwoBodySession {
   const TwoBodyModel& model() const { return model_; }
 
   // Runs one step for the device translation d (m, from the device's home position).
-  // A session's first step at a pose deeper inside the obstacle than detection looks for a
-  // new contact (TwoBodyModel::ToolInsideBeyondReach) first approaches it from home in small
-  // steps (1 mm apart, 0.25 mm in contact; not counted in `step`): a client resumed mid-press
-  // on another server, 11 mm into benchmark 1's bar, found no contact and got 0 N until it
-  // had lifted to 1 mm (a helper session). The approach is a straight line from home, so it
-  // carries that path's friction history; it runs only when the direct step would find nothing.
+  // A session's first step at a pose more than 2 mm from home with the tool inside the
+  // obstacle (TwoBodyModel::ToolInsideObstacle) first approaches it from home in small steps
+  // (1 mm apart, 0.1 mm in contact; not counted in `step`): lift 1 mm along the start's
+  // contact normal, across, then press in along it (TwoBodyModel::approach_normal). Detection
+  // without history finds contacts only within half a body's thickness, and a client resumed
+  // mid-press on another server, 11 mm into benchmark 1's bar, got 0 N until it had lifted to
+  // 1 mm (over a side edge, 4 N of 76; a helper session). It costs about a step per 0.1 mm of
+  // depth (12 ms for 12 mm on benchmark 1), once, on the session's stepping thread.
   const StepOutput& Step(const Eigen::Vector3d& device_translation_m);
 
   // Solver choice and parameters, initialised from the scene; change them between steps.
@@ -156,6 +158,8 @@ class TwoBodySession {
 
  private:
   const StepOutput& StepOnce(const Eigen::Vector3d& device_translation_m);
+  // A first pose within this of home is stepped directly (the server's jump limit), m.
+  static constexpr double kDirectFirstStepM = 2e-3;
   void BroadPhase(const Eigen::Vector3d& increment_m);
   // U = C f of the last forces on the region slots (kPrecomputed).
   void ObstacleDisplacementOnRegion();

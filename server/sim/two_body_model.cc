@@ -488,6 +488,12 @@ TwoBodyModel::TwoBodyModel(Parts parts)
         deepest = &c;
       }
     }
+    // The press direction of a session's approach (TwoBodySession::Step): the mean outward
+    // normal of the obstacle faces nearest the tool at the start.
+    for (const ContactPoint& c : contacts) {
+      if (c.gap_m <= initial_gap_m_ + 1e-6) approach_normal_ += c.frame.row(0).transpose();
+    }
+    if (approach_normal_.norm() > 0) approach_normal_.normalize();
     const double tolerance_m = 1e-9 * (obstacle_thickness_m_ + tool_thickness_m_);
     if (deepest != nullptr && initial_gap_m_ < -tolerance_m) {
       const Eigen::Vector3d x = Position(tool_mesh, deepest->tool_node);
@@ -583,11 +589,14 @@ TwoBodyModel::TwoBodyModel(Parts parts)
   stats_.total_seconds = stats_.build_seconds + total.ElapsedSeconds();
 }
 
-bool TwoBodyModel::ToolInsideBeyondReach(const Eigen::Vector3d& device_translation_m, double reach_m) const {
+bool TwoBodyModel::ToolInsideObstacle(const Eigen::Vector3d& device_translation_m) const {
   const fem::Mesh& tool_mesh = tool_.mesh();
+  // Touching is not inside: a node within 1 % of the obstacle's thickness of one of its
+  // contact faces is left to detection. (On a tetrahedron's face or corner counts as in it:
+  // with matching grids the tool's nodes lie on the obstacle's internal faces.)
+  const Eigen::Vector3d touching = Eigen::Vector3d::Constant(0.01 * obstacle_thickness_m_);
   std::vector<int> hits, stack;
-  for (std::size_t slot = 0; slot < tool_surface_.nodes.size(); ++slot) {
-    const int node = tool_surface_.nodes[slot];
+  for (int node : tool_surface_.nodes) {
     const Eigen::Vector3d x = Position(tool_mesh, node) + device_translation_m;
     if ((x.array() < obstacle_lo_m_.array()).any() || (x.array() > obstacle_hi_m_.array()).any()) continue;
     bool inside = false;
@@ -597,20 +606,12 @@ bool TwoBodyModel::ToolInsideBeyondReach(const Eigen::Vector3d& device_translati
         continue;
       }
       const Eigen::Vector3d l = obstacle_tet_to_barycentric_[k] * (x - obstacle_tet_origin_m_[k]);
-      inside = l.minCoeff() >= 0.0 && l.sum() <= 1.0;
+      inside = l.minCoeff() >= -1e-9 && l.sum() <= 1.0 + 1e-9;
     }
     if (!inside) continue;
     hits.clear();
-    obstacle_surface_.triangle_tree.Overlapping(x - Eigen::Vector3d::Constant(reach_m),
-                                                x + Eigen::Vector3d::Constant(reach_m), &hits, &stack);
-    // Only faces the node can meet count (detection's normal check: they face each other).
-    // A bottom node 12 mm into benchmark 1's 20 mm bar is 5 mm from its side faces, but
-    // those are parallel to its normal: it finds no contact.
-    const Eigen::Vector3d& node_normal = tool_surface_.node_normals[slot];
-    const bool facing = std::any_of(hits.begin(), hits.end(), [&](int t) {
-      return obstacle_surface_.triangle_frames[static_cast<std::size_t>(t)].row(0).dot(node_normal) < -0.5;
-    });
-    if (!facing) return true;
+    obstacle_surface_.triangle_tree.Overlapping(x - touching, x + touching, &hits, &stack);
+    if (hits.empty()) return true;
   }
   return false;
 }

@@ -146,14 +146,14 @@ class TwoBodyModel {
 
   const TwoBodyModelStats& stats() const { return stats_; }
 
-  // True when the undeformed tool moved by d (m) has a candidate node inside the obstacle's
-  // volume with no reachable obstacle face within reach_m of it: deeper than contact
-  // detection looks for a new contact, so a session starting there would find none (0 N). A
-  // session whose first pose is such (a client resumed mid-press on another server, a
-  // trajectory file starting inside) is approached from home instead (TwoBodySession::Step).
-  // Point-in-tetrahedron tests over the obstacle's tetrahedra: ~0.3 ms for benchmark 1, for
-  // a session's first step only.
-  bool ToolInsideBeyondReach(const Eigen::Vector3d& device_translation_m, double reach_m) const;
+  // True when the undeformed tool moved by d (m) has a surface node inside the obstacle's
+  // volume (its tetrahedra) and farther than 1 % of the obstacle's thickness from its contact
+  // faces (touching is not inside). Used on a session's first step only
+  // (TwoBodySession::Step); ~0.3 ms for benchmark 1.
+  bool ToolInsideObstacle(const Eigen::Vector3d& device_translation_m) const;
+  // The mean outward normal of the obstacle faces nearest the tool at the start (unit; zero
+  // when the tool faces none within reach): the direction a session's approach presses along.
+  const Eigen::Vector3d& approach_normal() const { return approach_normal_; }
 
  private:
   struct Parts;  // the scene, its bodies and their candidate faces, made before the members
@@ -175,12 +175,13 @@ class TwoBodyModel {
   double initial_gap_m_ = 0.0;
   double rigid_contact_compliance_m_per_n_ = 0.0;
   TwoBodyModelStats stats_;
-  // The obstacle's tetrahedra (corners) for ToolInsideBeyondReach: boxes, first corner, and
+  // The obstacle's tetrahedra (corners) for ToolInsideObstacle: boxes, first corner, and
   // the map to barycentric coordinates (empty matrix: degenerate, skipped).
   std::vector<Eigen::Vector3d> obstacle_tet_lo_m_, obstacle_tet_hi_m_, obstacle_tet_origin_m_;
   std::vector<Eigen::Matrix3d> obstacle_tet_to_barycentric_;
   std::vector<char> obstacle_tet_usable_;
   Eigen::Vector3d obstacle_lo_m_ = Eigen::Vector3d::Zero(), obstacle_hi_m_ = Eigen::Vector3d::Zero();
+  Eigen::Vector3d approach_normal_ = Eigen::Vector3d::Zero();
 };
 
 // A note for the user when the tool does not touch the obstacle at the start (its gap exceeds

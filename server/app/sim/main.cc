@@ -439,6 +439,11 @@ int Run(const Options& options) {
       session.Step(pose_m);
     }
     const auto& out = session.last_output();
+    if (out.approach_steps > 0) {
+      std::printf("note: the first pose has the tool %.3g mm from home and inside the obstacle: approached from "
+                  "home in %d steps first (lift, across, press in along the start's contact normal)\n",
+                  out.device_translation_m.norm() * 1e3, out.approach_steps);
+    }
     if (out.status != hapco::contact::SolverStatus::kConverged) ++not_converged;
     if (out.compliance_out_of_range) ++out_of_range;
     peak_force_n = std::max(peak_force_n, out.contact_force_n.norm());

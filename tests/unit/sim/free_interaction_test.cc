@@ -368,11 +368,11 @@ TEST(FreeInteractionTest, AFastLiftKeepsTheContactAndTheForceOfASlowOne) {
   }
 }
 
-// A session whose first pose is deeper in the bar than detection looks for a new contact (a
-// client resumed mid-press on another server after a failover): it is approached from home
-// and gives the force of a gradual press (it gave 0 N until the tool had lifted to 1 mm: a
-// helper session, benchmark 1 at 11 mm). A first pose beside the bar, below its top, touches
-// nothing and is stepped directly.
+// A session whose first pose has the tool deep in the bar (a client resumed mid-press on
+// another server after a failover): it is approached from home (lift, across, press in along
+// the start's contact normal) and gives the force of a gradual press (it gave 0 N until the
+// tool had lifted to 1 mm: a helper session, benchmark 1 at 11 mm). A first pose beside the
+// bar, below its top, touches nothing and is stepped directly.
 TEST(FreeInteractionTest, ASessionOpenedDeepInsideIsApproachedFromHome) {
   const TwoBodyModel model(BarScene(/*clamp_both_ends=*/true));
   const Eigen::Vector3d deep(0, 0, -0.012);  // 12 mm into the 20 mm bar: detection reaches 9 mm
