@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstdint>
 #include <filesystem>
+#include <functional>
 #include <sstream>
 #include <string>
 #include <thread>
@@ -94,28 +95,37 @@ void ExpectContactsConsistent(const recording::Step& step) {
   EXPECT_LT((sum_n - f).norm(), 1e-12 * (1 + f.norm())) << "step " << step.step();
 }
 
-// (a) Every step the server made is in the recording, in order, equal to the server's trace.
-TEST(RecorderProcess, RecordingHoldsExactlyTheServersSteps) {
-  const std::string dir = TestDir();
+// A server (with --trace DIR/trace.csv), a recorder writing `file` and one phantom
+// (`phantom_args` added) in DIR; `during` runs while the phantom does, with the recorder.
+// Server first at the end: once it has exited cleanly (its writers linger until their data is
+// acknowledged), every frame is in the recorder's reader; then the recorder drains and stops.
+void RunRecordedPhantom(const std::string& dir, const std::string& file, const std::vector<std::string>& phantom_args,
+                        const std::function<void(Process* recorder)>& during = {}) {
   const std::string domain = std::to_string(SetUpTestDomain());
-  const std::string file = dir + "/run.hapcorec";
   Process server({HAPCO_SERVER_EXE, kScene, "--domain", domain, "--status-period-s", "0.2", "--trace",
                   dir + "/trace.csv", "--quiet"},
                  dir + "/server.out", dir + "/server.err");
   std::unique_ptr<Process> recorder;
   ASSERT_NO_FATAL_FAILURE(StartRecorder(&recorder, dir, domain, file));
   {
-    Process phantom({HAPCO_PHANTOM_EXE, kScene, "--client-id", "phantom-1", "--domain", domain,
-                     "--connect-timeout-s", "60"},
-                    dir + "/phantom.out", dir + "/phantom.err");
+    std::vector<std::string> args = {HAPCO_PHANTOM_EXE, kScene, "--client-id", "phantom-1", "--domain", domain,
+                                     "--connect-timeout-s", "60"};
+    args.insert(args.end(), phantom_args.begin(), phantom_args.end());
+    Process phantom(args, dir + "/phantom.out", dir + "/phantom.err");
+    if (during) during(recorder.get());
     ASSERT_EQ(phantom.Wait(120'000), 0) << ReadFile(dir + "/phantom.err");
   }
-  // Server first: once it has exited cleanly (its writers linger until their data is
-  // acknowledged), every frame is in the recorder's reader; then the recorder drains and stops.
   server.Signal(SIGTERM);
   ASSERT_EQ(server.Wait(30'000), 0) << ReadFile(dir + "/server.err");
   recorder->Signal(SIGTERM);
   ASSERT_EQ(recorder->Wait(30'000), 0) << ReadFile(dir + "/recorder.err");
+}
+
+// (a) Every step the server made is in the recording, in order, equal to the server's trace.
+TEST(RecorderProcess, RecordingHoldsExactlyTheServersSteps) {
+  const std::string dir = TestDir();
+  const std::string file = dir + "/run.hapcorec";
+  ASSERT_NO_FATAL_FAILURE(RunRecordedPhantom(dir, file, {}));
   const std::string summary = ReadFile(dir + "/recorder.out");
   std::printf("%s%s", ReadFile(dir + "/server.out").c_str(), summary.c_str());
 
@@ -194,17 +204,8 @@ TEST(RecorderProcess, RecordingHoldsExactlyTheServersSteps) {
 // session; 3 runs of 3). The recording must hold exactly the server's steps, once each.
 TEST(RecorderProcess, AStalledRecorderRecordsEveryStepOnce) {
   const std::string dir = TestDir();
-  const std::string domain = std::to_string(SetUpTestDomain());
   const std::string file = dir + "/run.hapcorec";
-  Process server({HAPCO_SERVER_EXE, kScene, "--domain", domain, "--status-period-s", "0.2", "--trace",
-                  dir + "/trace.csv", "--quiet"},
-                 dir + "/server.out", dir + "/server.err");
-  std::unique_ptr<Process> recorder;
-  ASSERT_NO_FATAL_FAILURE(StartRecorder(&recorder, dir, domain, file));
-  {
-    Process phantom({HAPCO_PHANTOM_EXE, kScene, "--client-id", "phantom-1", "--domain", domain,
-                     "--connect-timeout-s", "60", "--duration-s", "3"},
-                    dir + "/phantom.out", dir + "/phantom.err");
+  ASSERT_NO_FATAL_FAILURE(RunRecordedPhantom(dir, file, {"--duration-s", "3"}, [&dir](Process* recorder) {
     // Once the server is stepping (its trace has rows), stall the recorder three times.
     for (int k = 0; k < 600 && ReadFile(dir + "/trace.csv").size() < 2000; ++k) {
       std::this_thread::sleep_for(std::chrono::milliseconds(20));  // polling the trace, not a wait
@@ -215,12 +216,7 @@ TEST(RecorderProcess, AStalledRecorderRecordsEveryStepOnce) {
       recorder->Signal(SIGCONT);
       std::this_thread::sleep_for(std::chrono::milliseconds(300));
     }
-    ASSERT_EQ(phantom.Wait(120'000), 0) << ReadFile(dir + "/phantom.err");
-  }
-  server.Signal(SIGTERM);
-  ASSERT_EQ(server.Wait(30'000), 0) << ReadFile(dir + "/server.err");
-  recorder->Signal(SIGTERM);
-  ASSERT_EQ(recorder->Wait(30'000), 0) << ReadFile(dir + "/recorder.err");
+  }));
   const std::vector<TraceRow> trace = ReadTrace(dir + "/trace.csv");
   ASSERT_GE(trace.size(), 1000u);
   io::RecordingReadReport report;
