@@ -1,7 +1,6 @@
 #include "force_renderer.h"
 
 #include <algorithm>
-#include <limits>
 #include <cmath>
 
 #include "common/error.h"

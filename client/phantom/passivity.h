@@ -78,7 +78,6 @@ class PassivityController {
   double dissipated_j() const { return dissipated_j_; }     // Σ α |v|² Δt asked of the damper, J
   double forgiven_j() const { return forgiven_j_; }         // debt forgiven by the time constant, J
   double min_energy_j() const { return min_energy_j_; }     // lowest E(n) so far, J
-  double max_damping_n_s_per_m() const { return max_damping_; }
   long active_ticks() const { return active_ticks_; }       // ticks with α > 0
   double last_damping_n_s_per_m() const { return last_damping_; }
   void Reset();

@@ -39,7 +39,9 @@ int Find(const std::vector<std::string>& header, const std::string& name) {
   return -1;
 }
 
-TrajectoryFile ReadTrajectoryCsv(std::istream& in, const std::string& path, const std::string& client_id) {
+// client_id_if_listed: a file without a client_id column is read whole despite a client id.
+TrajectoryFile ReadTrajectoryCsv(std::istream& in, const std::string& path, const std::string& client_id,
+                                 bool client_id_if_listed = false) {
   TrajectoryFile file;
   std::vector<Eigen::Vector3d>& points = file.points;
   points.push_back(Eigen::Vector3d::Zero());
@@ -146,7 +148,7 @@ TrajectoryFile ReadTrajectoryCsv(std::istream& in, const std::string& path, cons
     for (const auto& c : clients_seen) names += (names.empty() ? "" : ", ") + c;
     throw InputError(path + ": holds the poses of several clients (" + names + "): choose one client_id");
   }
-  if (!client_id.empty() && client_column < 0) {
+  if (!client_id.empty() && client_column < 0 && !client_id_if_listed) {
     throw InputError(path + ": has no client_id column, so a client id selects nothing: give one only for a file "
                      "that holds several clients (a server's --trace, hapco-report --csv)");
   }
@@ -166,15 +168,9 @@ TrajectoryFile LoadTrajectoryFile(const std::string& path, const std::string& cl
 
 std::vector<Eigen::Vector3d> LoadTrajectoryCsv(const std::string& path, const std::string& client_id,
                                                bool client_id_if_listed) {
-  if (client_id_if_listed && !client_id.empty()) {
-    std::ifstream in(path);
-    if (!in) throw InputError("cannot read trajectory " + path);
-    std::string header;
-    std::getline(in, header);
-    if (header.rfind("\xEF\xBB\xBF", 0) == 0) header.erase(0, 3);
-    if (Find(SplitCsv(header), "client_id") < 0) return LoadTrajectoryFile(path, "").points;
-  }
-  return LoadTrajectoryFile(path, client_id).points;
+  std::ifstream in(path);
+  if (!in) throw InputError("cannot read trajectory " + path);
+  return ReadTrajectoryCsv(in, path, client_id, client_id_if_listed).points;
 }
 
 std::vector<Eigen::Vector3d> ParseTrajectoryCsv(const std::string& text, const std::string& source_name,

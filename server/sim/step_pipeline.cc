@@ -495,22 +495,17 @@ const StepOutput& TwoBodySession::Step(const Eigen::Vector3d& device_translation
   int approach_steps = 0;
   Eigen::Vector3d at = device_translation_m_;
   for (int w = 0; w < num_waypoints; ++w) {
+    const Eigen::Vector3d& to = waypoints[static_cast<std::size_t>(w)];
     for (;;) {
       const double step_m = output_.num_contacts > 0 ? kContactStepM : kApartStepM;
-      const Eigen::Vector3d left = waypoints[static_cast<std::size_t>(w)] - at;
-      if (left.norm() <= step_m) {
-        if (w + 1 < num_waypoints) {
-          at = waypoints[static_cast<std::size_t>(w)];
-          StepOnce(at);
-          output_.step = 0;
-          ++approach_steps;
-        }
-        break;
-      }
-      at += left * (step_m / left.norm());
+      const Eigen::Vector3d left = to - at;
+      const bool reached = left.norm() <= step_m;
+      if (reached && w + 1 == num_waypoints) break;  // the pose itself: the session's step below
+      at = reached ? to : Eigen::Vector3d(at + left * (step_m / left.norm()));
       StepOnce(at);
       output_.step = 0;  // the approach is not the session's steps
       ++approach_steps;
+      if (reached) break;
     }
   }
   StepOnce(device_translation_m);

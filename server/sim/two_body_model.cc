@@ -40,48 +40,13 @@ struct NodeInside {
 // boundary has depth 0. The start check by contact detection only sees a node within 0.45 of
 // a body's thickness of a face it can face; a tool placed wholly inside the obstacle, or deeper
 // than that, passes it and then meets no face at all (0 N for ever, found by a helper session).
-// Only nodes inside body's box are tested, each against the tetrahedra whose box holds it.
-NodeInside DeepestNodeInside(const fem::Mesh& body, const fem::Mesh& other) {
+// `locator` is body's (TetrahedronLocator).
+NodeInside DeepestNodeInside(const TetrahedronLocator& locator, const fem::Mesh& body, const fem::Mesh& other) {
   NodeInside deepest;
-  const Eigen::RowVector3d body_lo = body.nodes_m.colwise().minCoeff();
-  const Eigen::RowVector3d body_hi = body.nodes_m.colwise().maxCoeff();
-  std::vector<int> candidates;
-  for (int n = 0; n < other.num_nodes(); ++n) {
-    const Eigen::RowVector3d x = other.nodes_m.row(n);
-    if ((x.array() >= body_lo.array()).all() && (x.array() <= body_hi.array()).all()) candidates.push_back(n);
-  }
-  if (candidates.empty()) return deepest;
-  const int num_tets = body.num_elements();
-  std::vector<Eigen::Vector3d> tet_lo(static_cast<std::size_t>(num_tets)), tet_hi(static_cast<std::size_t>(num_tets));
-  std::vector<Eigen::Matrix3d> to_barycentric(static_cast<std::size_t>(num_tets));
-  std::vector<char> usable(static_cast<std::size_t>(num_tets), 0);
-  for (int e = 0; e < num_tets; ++e) {
-    const Eigen::Vector3d x0 = Position(body, body.elements(e, 0));
-    Eigen::Matrix3d edges;
-    for (int k = 1; k < 4; ++k) edges.col(k - 1) = Position(body, body.elements(e, k)) - x0;
-    Eigen::Vector3d lo = x0, hi = x0;
-    for (int k = 1; k < 4; ++k) {
-      lo = lo.cwiseMin(Position(body, body.elements(e, k)));
-      hi = hi.cwiseMax(Position(body, body.elements(e, k)));
-    }
-    tet_lo[static_cast<std::size_t>(e)] = lo;
-    tet_hi[static_cast<std::size_t>(e)] = hi;
-    bool invertible = false;
-    edges.computeInverseWithCheck(to_barycentric[static_cast<std::size_t>(e)], invertible);
-    usable[static_cast<std::size_t>(e)] = invertible ? 1 : 0;
-  }
   const std::vector<fem::SurfaceTriangle> boundary = fem::BoundaryTriangles(body);
-  constexpr double kOnTetrahedron = -1e-9;  // barycentric slack: on a face or corner counts
-  for (int n : candidates) {
+  for (int n = 0; n < other.num_nodes(); ++n) {
     const Eigen::Vector3d x = Position(other, n);
-    bool inside = false;
-    for (int e = 0; e < num_tets && !inside; ++e) {
-      const auto k = static_cast<std::size_t>(e);
-      if (!usable[k] || (x.array() < tet_lo[k].array()).any() || (x.array() > tet_hi[k].array()).any()) continue;
-      const Eigen::Vector3d l = to_barycentric[k] * (x - Position(body, body.elements(e, 0)));
-      inside = l.minCoeff() >= kOnTetrahedron && 1.0 - l.sum() >= kOnTetrahedron;
-    }
-    if (!inside) continue;
+    if (!locator.Contains(x)) continue;
     double depth_m = std::numeric_limits<double>::infinity();
     for (const fem::SurfaceTriangle& tri : boundary) {
       const Eigen::Vector3d a = Position(body, tri.corners[0]), b = Position(body, tri.corners[1]),
@@ -472,6 +437,7 @@ TwoBodyModel::TwoBodyModel(Parts parts)
   }
 
   // A tool that starts inside the obstacle has no meaningful first step: say how deep.
+  obstacle_locator_ = TetrahedronLocator(obstacle_mesh);
   {
     ContactDetector detector(obstacle_surface_.triangles, obstacle_mesh.nodes_m, tool_surface_.nodes,
                              tool_surface_.node_normals, obstacle_surface_.subtriangle_faces);
@@ -508,8 +474,8 @@ TwoBodyModel::TwoBodyModel(Parts parts)
     // face's curved boundary lies off its straight corner faces by up to a few per cent of
     // the curvature radius, which this test would take for an overlap.
     const double deep_m = 0.05 * std::min(obstacle_thickness_m_, tool_thickness_m_);
-    const NodeInside tool_node = DeepestNodeInside(obstacle_mesh, tool_mesh);
-    const NodeInside obstacle_node = DeepestNodeInside(tool_mesh, obstacle_mesh);
+    const NodeInside tool_node = DeepestNodeInside(obstacle_locator_, obstacle_mesh, tool_mesh);
+    const NodeInside obstacle_node = DeepestNodeInside(TetrahedronLocator(tool_mesh), tool_mesh, obstacle_mesh);
     const bool tool_deeper = tool_node.depth_m >= obstacle_node.depth_m;
     const NodeInside& node = tool_deeper ? tool_node : obstacle_node;
     if (node.node >= 0 && node.depth_m > deep_m) {
@@ -520,36 +486,6 @@ TwoBodyModel::TwoBodyModel(Parts parts)
               << (tool_deeper ? "obstacle" : "tool") << "; move the tool (its box, or its mesh's offset_m) so the bodies touch at most (zero gap)";
       throw InputError(message.str());
     }
-  }
-
-  {
-    const fem::Mesh& mesh = obstacle_.mesh();
-    const auto num_tets = static_cast<std::size_t>(mesh.num_elements());
-    obstacle_tet_lo_m_.resize(num_tets);
-    obstacle_tet_hi_m_.resize(num_tets);
-    obstacle_tet_origin_m_.resize(num_tets);
-    obstacle_tet_to_barycentric_.resize(num_tets);
-    obstacle_tet_usable_.assign(num_tets, 0);
-    for (int e = 0; e < mesh.num_elements(); ++e) {
-      const auto k = static_cast<std::size_t>(e);
-      const Eigen::Vector3d x0 = Position(mesh, mesh.elements(e, 0));
-      Eigen::Matrix3d edges;
-      Eigen::Vector3d lo = x0, hi = x0;
-      for (int c = 1; c < 4; ++c) {
-        const Eigen::Vector3d x = Position(mesh, mesh.elements(e, c));
-        edges.col(c - 1) = x - x0;
-        lo = lo.cwiseMin(x);
-        hi = hi.cwiseMax(x);
-      }
-      obstacle_tet_lo_m_[k] = lo;
-      obstacle_tet_hi_m_[k] = hi;
-      obstacle_tet_origin_m_[k] = x0;
-      bool invertible = false;
-      edges.computeInverseWithCheck(obstacle_tet_to_barycentric_[k], invertible);
-      obstacle_tet_usable_[k] = invertible ? 1 : 0;
-    }
-    obstacle_lo_m_ = mesh.nodes_m.colwise().minCoeff().transpose();
-    obstacle_hi_m_ = mesh.nodes_m.colwise().maxCoeff().transpose();
   }
 
   Stopwatch compliance;
@@ -598,17 +534,7 @@ bool TwoBodyModel::ToolInsideObstacle(const Eigen::Vector3d& device_translation_
   std::vector<int> hits, stack;
   for (int node : tool_surface_.nodes) {
     const Eigen::Vector3d x = Position(tool_mesh, node) + device_translation_m;
-    if ((x.array() < obstacle_lo_m_.array()).any() || (x.array() > obstacle_hi_m_.array()).any()) continue;
-    bool inside = false;
-    for (std::size_t k = 0; k < obstacle_tet_usable_.size() && !inside; ++k) {
-      if (!obstacle_tet_usable_[k] || (x.array() < obstacle_tet_lo_m_[k].array()).any() ||
-          (x.array() > obstacle_tet_hi_m_[k].array()).any()) {
-        continue;
-      }
-      const Eigen::Vector3d l = obstacle_tet_to_barycentric_[k] * (x - obstacle_tet_origin_m_[k]);
-      inside = l.minCoeff() >= -1e-9 && l.sum() <= 1.0 + 1e-9;
-    }
-    if (!inside) continue;
+    if (!obstacle_locator_.Contains(x)) continue;
     hits.clear();
     obstacle_surface_.triangle_tree.Overlapping(x - touching, x + touching, &hits, &stack);
     if (hits.empty()) return true;

@@ -23,6 +23,7 @@
 #include "sim/box_tree.h"
 #include "sim/collision.h"
 #include "sim/scene.h"
+#include "sim/tetrahedron_locator.h"
 
 namespace hapco::sim {
 
@@ -175,12 +176,7 @@ class TwoBodyModel {
   double initial_gap_m_ = 0.0;
   double rigid_contact_compliance_m_per_n_ = 0.0;
   TwoBodyModelStats stats_;
-  // The obstacle's tetrahedra (corners) for ToolInsideObstacle: boxes, first corner, and
-  // the map to barycentric coordinates (empty matrix: degenerate, skipped).
-  std::vector<Eigen::Vector3d> obstacle_tet_lo_m_, obstacle_tet_hi_m_, obstacle_tet_origin_m_;
-  std::vector<Eigen::Matrix3d> obstacle_tet_to_barycentric_;
-  std::vector<char> obstacle_tet_usable_;
-  Eigen::Vector3d obstacle_lo_m_ = Eigen::Vector3d::Zero(), obstacle_hi_m_ = Eigen::Vector3d::Zero();
+  TetrahedronLocator obstacle_locator_;  // the obstacle's volume (start check, ToolInsideObstacle)
   Eigen::Vector3d approach_normal_ = Eigen::Vector3d::Zero();
 };
 
