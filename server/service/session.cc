@@ -126,7 +126,9 @@ int64_t Session::StepAndPublish(const hapco_idl_DevicePose& pose, int64_t receiv
     force_.sticking_count = static_cast<uint32_t>(out.state_counts[1]);
     force_.sliding_count = static_cast<uint32_t>(out.state_counts[2]);
     // (The multirate answerer has linearized this step already.)
-    FillLocalModel(force_finite, /*linearized=*/multirate);
+    // An approach's answer (TwoBodySession::Step) is at a pose short of the device's: no model
+    // to render the device's pose from.
+    FillLocalModel(force_finite && !out.approaching, /*linearized=*/multirate);
   } else {
     force_.iterations = 0;  // the status and contact counts stay the last step's
     if (turned) FillLocalModel(out.device_force_n.allFinite(), /*linearized=*/true);  // the turn's step

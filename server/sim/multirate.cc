@@ -149,6 +149,11 @@ bool MultirateAnswerer::FrozenContactsAnswer(const Eigen::Vector3d& d, Eigen::Ve
 
 void MultirateAnswerer::StepAt(const Eigen::Vector3d& device_translation_m) {
   session_->Step(device_translation_m);
+  model_answers_in_a_row_ = 0;
+  // An approach's step (TwoBodySession::Step) is at a pose on the way, not at this one: no
+  // model to answer this pose's neighbours from, so the next pose is stepped too.
+  have_model_ = !session_->last_output().approaching;
+  if (!have_model_) return;
   builder_->Linearize(*session_);
   if (parameters_.physics_every > 1) {
     if (parameters_.between_steps == BetweenSteps::kReturnMapping) {
@@ -157,8 +162,6 @@ void MultirateAnswerer::StepAt(const Eigen::Vector3d& device_translation_m) {
       FreezeLastStep();
     }
   }
-  have_model_ = true;
-  model_answers_in_a_row_ = 0;
 }
 
 MultirateAnswer MultirateAnswerer::Answer(const Eigen::Vector3d& device_translation_m) {

@@ -139,6 +139,7 @@ TwoBodySession::TwoBodySession(const TwoBodyModel& model, SolveMode mode)
 }
 
 void TwoBodySession::Reset() {
+  approach_ = Approach{};
   const auto n_tool = tool_surface_.nodes.size();
   const auto n_obstacle = obstacle_surface_.nodes.size();
   device_translation_m_.setZero();
@@ -473,43 +474,65 @@ const StepOutput& TwoBodySession::Step(const Eigen::Vector3d& device_translation
   if (!device_translation_m.allFinite()) {
     throw InputError("device translation must be finite");
   }
-  if (output_.step > 0 || device_translation_m.norm() <= kDirectFirstStepM ||
-      !model_.ToolInsideObstacle(device_translation_m)) {
-    return StepOnce(device_translation_m);
+  if (!approaching()) {
+    if (output_.step > 0 || device_translation_m.norm() <= kDirectFirstStepM ||
+        !model_.ToolInsideObstacle(device_translation_m)) {
+      return StepOnce(device_translation_m);
+    }
+    StartApproach(device_translation_m);
   }
+  return ContinueApproach(device_translation_m);
+}
+
+void TwoBodySession::StartApproach(const Eigen::Vector3d& device_translation_m) {
   // Where the device came from is unknown. The approach presses in along the start's contact
   // normal n, as a user meets a surface: lift 1 mm off it, move across above it, press to the
   // pose (with friction; a straight line from home dragged the tool sideways into the bar and
   // gave side forces of the wrong sign, and a frictionless one lost the sticking contacts'
   // share of the normal force: 2-3 % mid-span, 46 % next to a clamp; a helper session).
-  constexpr double kApartStepM = 1e-3, kContactStepM = 1e-4, kLiftM = 1e-3;
+  constexpr double kLiftM = 1e-3;
   const Eigen::Vector3d& n = model_.approach_normal();
-  std::array<Eigen::Vector3d, 3> waypoints;
-  int num_waypoints = 0;
+  approach_ = Approach{};
+  approach_.at_m = device_translation_m_;
   if (n.norm() > 0) {
     const Eigen::Vector3d across = device_translation_m - n * n.dot(device_translation_m);
-    waypoints[num_waypoints++] = kLiftM * n;
-    waypoints[num_waypoints++] = across + kLiftM * n;
+    approach_.waypoints[static_cast<std::size_t>(approach_.num_waypoints++)] = kLiftM * n;
+    approach_.waypoints[static_cast<std::size_t>(approach_.num_waypoints++)] = across + kLiftM * n;
   }
-  waypoints[num_waypoints++] = device_translation_m;
+  approach_.waypoints[static_cast<std::size_t>(approach_.num_waypoints++)] = device_translation_m;
+}
+
+const StepOutput& TwoBodySession::ContinueApproach(const Eigen::Vector3d& device_translation_m) {
+  constexpr double kApartStepM = 1e-3, kContactStepM = 1e-4;
+  const int step = output_.step + 1;
   int approach_steps = 0;
-  Eigen::Vector3d at = device_translation_m_;
-  for (int w = 0; w < num_waypoints; ++w) {
-    const Eigen::Vector3d& to = waypoints[static_cast<std::size_t>(w)];
-    for (;;) {
-      const double step_m = output_.num_contacts > 0 ? kContactStepM : kApartStepM;
-      const Eigen::Vector3d left = to - at;
-      const bool reached = left.norm() <= step_m;
-      if (reached && w + 1 == num_waypoints) break;  // the pose itself: the session's step below
-      at = reached ? to : Eigen::Vector3d(at + left * (step_m / left.norm()));
-      StepOnce(at);
-      output_.step = 0;  // the approach is not the session's steps
-      ++approach_steps;
-      if (reached) break;
+  bool arrived = false;
+  for (double budget = kApproachBudget; budget > 0.0;) {
+    // Past the waypoints (the last is the first pose), the approach follows the device, which
+    // may have moved meanwhile, in the same small steps: as a user would press in, then move.
+    const bool following = approach_.next >= approach_.num_waypoints;
+    const Eigen::Vector3d& to =
+        following ? device_translation_m : approach_.waypoints[static_cast<std::size_t>(approach_.next)];
+    const double step_m = output_.num_contacts > 0 ? kContactStepM : kApartStepM;
+    if (approach_.next + 1 >= approach_.num_waypoints && (device_translation_m - approach_.at_m).norm() <= step_m) {
+      arrived = true;  // the device's pose is a step away: the step below
+      break;
     }
+    const Eigen::Vector3d left = to - approach_.at_m;
+    const bool reached = left.norm() <= step_m;
+    approach_.at_m = reached ? to : Eigen::Vector3d(approach_.at_m + left * (step_m / left.norm()));
+    StepOnce(approach_.at_m);
+    ++approach_steps;
+    budget -= output_.num_contacts > 0 ? 1.0 : kApproachApartCost;
+    if (reached && !following) ++approach_.next;
   }
-  StepOnce(device_translation_m);
+  if (arrived) {
+    approach_ = Approach{};
+    StepOnce(device_translation_m);
+  }
+  output_.step = step;  // the approach's own steps are not the session's
   output_.approach_steps = approach_steps;
+  output_.approaching = !arrived;
   return output_;
 }
 

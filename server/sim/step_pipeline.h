@@ -89,7 +89,10 @@ struct StepOutput {
   // Banded obstacle compliance (SceneSpec::compliance_range_m): the step needed a node pair
   // beyond the range, which reads as zero (raise the range). Always false when dense.
   bool compliance_out_of_range = false;
-  int approach_steps = 0;  // steps run from home before this one (a first pose deep inside; Step)
+  // A first pose deep inside (TwoBodySession::Step): the approach's steps run in this call, and
+  // whether the answer is still at a pose on the way (true) rather than at the device's.
+  int approach_steps = 0;
+  bool approaching = false;
   double detect_seconds = 0.0;    // broad phase (incl. the obstacle displacement there) + both passes
   double assemble_seconds = 0.0;  // ũ and W
   double solve_seconds = 0.0;
@@ -121,14 +124,20 @@ class TwoBodySession {
 
   // Runs one step for the device translation d (m, from the device's home position).
   // A session's first step at a pose more than 2 mm from home with the tool inside the
-  // obstacle (TwoBodyModel::ToolInsideObstacle) first approaches it from home in small steps
-  // (1 mm apart, 0.1 mm in contact; not counted in `step`): lift 1 mm along the start's
-  // contact normal, across, then press in along it (TwoBodyModel::approach_normal). Detection
-  // without history finds contacts only within half a body's thickness, and a client resumed
-  // mid-press on another server, 11 mm into benchmark 1's bar, got 0 N until it had lifted to
-  // 1 mm (over a side edge, 4 N of 76; a helper session). It costs about a step per 0.1 mm of
-  // depth (12 ms for 12 mm on benchmark 1), once, on the session's stepping thread.
+  // obstacle (TwoBodyModel::ToolInsideObstacle) starts an approach from home in small steps
+  // (1 mm apart, 0.1 mm in contact): lift 1 mm along the start's contact normal, across, then
+  // press in along it (TwoBodyModel::approach_normal) to that pose, then follow the device in
+  // the same steps if it has moved meanwhile. Detection without
+  // history finds contacts only within half a body's thickness, and a client resumed mid-press
+  // on another server, 11 mm into benchmark 1's bar, got 0 N until it had lifted to 1 mm (over
+  // a side edge, 4 N of 76; a helper session). The approach is spread over the session's calls,
+  // about two contact steps each (kApproachBudget), so sessions sharing a stepping thread are
+  // not held up (all at once it held the thread for 30-40 ms for 12 mm); each call answers the
+  // force at the pose the approach has reached (StepOutput::approaching), rising as it presses
+  // in, until it reaches the device's pose. Calls count one `step` each.
   const StepOutput& Step(const Eigen::Vector3d& device_translation_m);
+  // An approach (above) is still on its way to the device's pose.
+  bool approaching() const { return approach_.num_waypoints > 0; }
 
   // Solver choice and parameters, initialised from the scene; change them between steps.
   contact::SolverKind solver = contact::SolverKind::kLocalUzawa;
@@ -160,6 +169,18 @@ class TwoBodySession {
   const StepOutput& StepOnce(const Eigen::Vector3d& device_translation_m);
   // A first pose within this of home is stepped directly (the server's jump limit), m.
   static constexpr double kDirectFirstStepM = 2e-3;
+  // The approach's work per call, in steps with contacts; a step without contacts (no
+  // detection hits, no solve) counts a quarter: about three steps' cost a call.
+  static constexpr double kApproachBudget = 2.0, kApproachApartCost = 0.25;
+  // The approach's waypoints (the last is the first pose) and where it is.
+  struct Approach {
+    std::array<Eigen::Vector3d, 3> waypoints;
+    int num_waypoints = 0;  // 0: no approach running
+    int next = 0;
+    Eigen::Vector3d at_m = Eigen::Vector3d::Zero();
+  };
+  void StartApproach(const Eigen::Vector3d& device_translation_m);
+  const StepOutput& ContinueApproach(const Eigen::Vector3d& device_translation_m);
   void BroadPhase(const Eigen::Vector3d& increment_m);
   // U = C f of the last forces on the region slots (kPrecomputed).
   void ObstacleDisplacementOnRegion();
@@ -235,6 +256,7 @@ class TwoBodySession {
   contact::SolverWorkspace workspace_;
   contact::SolverResult result_;
   StepOutput output_;
+  Approach approach_;
   int max_contacts_ = 0;
   // kFullSolve scratch: active slots per body and their row blocks in the per-step blocks.
   std::vector<int> active_tool_, active_obstacle_;

@@ -399,6 +399,7 @@ int Run(const Options& options) {
   std::optional<hapco::sim::MultirateAnswerer> answerer;
   if (multirate) answerer.emplace(session, model_builder, options.multirate);
   long model_answers = 0;
+  int approach_poses = 0;  // poses answered by the running approach (TwoBodySession::Step)
   std::map<std::string, int> ignored;
   for (int step = 1; step <= steps; ++step) {
     const Eigen::Vector3d pose_m = translation_at(step);
@@ -408,6 +409,7 @@ int Run(const Options& options) {
       ++sessions_in_file;
       last_pose.reset();
       session.Reset();
+      approach_poses = 0;
       if (answerer) answerer.emplace(session, model_builder, options.multirate);
     }
     const hapco::sim::PoseVerdict verdict = hapco::sim::CheckPose(pose_m, sequence, last_pose, options.limits);
@@ -439,10 +441,15 @@ int Run(const Options& options) {
       session.Step(pose_m);
     }
     const auto& out = session.last_output();
-    if (out.approach_steps > 0) {
+    if (out.approach_steps > 0 && approach_poses++ == 0) {
       std::printf("note: the first pose has the tool %.3g mm from home and inside the obstacle: approached from "
-                  "home in %d steps first (lift, across, press in along the start's contact normal)\n",
-                  out.device_translation_m.norm() * 1e3, out.approach_steps);
+                  "home first (lift, across, press in along the start's contact normal, a few 0.1 mm steps a "
+                  "pose, as on a server); until it arrives, each pose's row has the force at the pose reached\n",
+                  pose_m.norm() * 1e3);
+    }
+    if (approach_poses > 0 && !out.approaching) {
+      std::printf("note: the approach reached the device's pose at step %d, after %d poses\n", step, approach_poses);
+      approach_poses = 0;
     }
     if (out.status != hapco::contact::SolverStatus::kConverged) ++not_converged;
     if (out.compliance_out_of_range) ++out_of_range;

@@ -371,28 +371,81 @@ TEST(FreeInteractionTest, AFastLiftKeepsTheContactAndTheForceOfASlowOne) {
 // A session whose first pose has the tool deep in the bar (a client resumed mid-press on
 // another server after a failover): it is approached from home (lift, across, press in along
 // the start's contact normal) and gives the force of a gradual press (it gave 0 N until the
-// tool had lifted to 1 mm: a helper session, benchmark 1 at 11 mm). A first pose beside the
-// bar, below its top, touches nothing and is stepped directly.
+// tool had lifted to 1 mm: a helper session, benchmark 1 at 11 mm). The approach runs a few
+// steps per call, so a stepping thread shared with other sessions is never held for the whole
+// approach (it once ran all of it in the first call: 30-40 ms for 12 mm on benchmark 1), and
+// each call answers the force reached so far, rising to the gradual press's. A first pose
+// beside the bar, below its top, touches nothing and is stepped directly.
 TEST(FreeInteractionTest, ASessionOpenedDeepInsideIsApproachedFromHome) {
   const TwoBodyModel model(BarScene(/*clamp_both_ends=*/true));
   const Eigen::Vector3d deep(0, 0, -0.012);  // 12 mm into the 20 mm bar: detection reaches 9 mm
   TwoBodySession gradual(model);
   Eigen::Vector3d pressed_n = Eigen::Vector3d::Zero();
-  for (const Eigen::Vector3d& d : PolylinePath({{0, 0, 0}, deep}, 1e-4)) pressed_n = gradual.Step(d).contact_force_n;
+  int gradual_steps = 0;
+  for (const Eigen::Vector3d& d : PolylinePath({{0, 0, 0}, deep}, 1e-4)) {
+    pressed_n = gradual.Step(d).contact_force_n;
+    ++gradual_steps;
+  }
   TwoBodySession opened(model);
-  const StepOutput& first = opened.Step(deep);
-  std::printf("first pose 12 mm deep: %.3f N after %d approach steps; gradual press %.3f N\n",
-              first.contact_force_n.norm(), first.approach_steps, pressed_n.norm());
-  EXPECT_EQ(first.step, 1) << "the approach is not counted as the session's steps";
-  EXPECT_GT(first.approach_steps, 10);
-  EXPECT_EQ(first.status, contact::SolverStatus::kConverged);
+  int calls = 0, approach_steps = 0, most_steps_in_a_call = 0;
+  double previous_n = 0.0, largest_drop_n = 0.0;
+  for (;;) {
+    const StepOutput& out = opened.Step(deep);
+    ++calls;
+    EXPECT_EQ(out.step, calls) << "one session step a call; the approach's own steps are not counted";
+    EXPECT_TRUE(out.contact_force_n.allFinite());
+    approach_steps += out.approach_steps;
+    most_steps_in_a_call = std::max(most_steps_in_a_call, out.approach_steps);
+    largest_drop_n = std::max(largest_drop_n, previous_n - out.contact_force_n.norm());
+    previous_n = out.contact_force_n.norm();
+    if (!out.approaching) break;
+    ASSERT_LT(calls, 1000) << "the approach never arrives";
+  }
+  const StepOutput& arrived = opened.last_output();
+  std::printf("first pose 12 mm deep: %.3f N after %d calls (%d approach steps, at most %d in a call, largest "
+              "drop %.3g N); gradual press %.3f N in %d steps\n",
+              arrived.contact_force_n.norm(), calls, approach_steps, most_steps_in_a_call, largest_drop_n,
+              pressed_n.norm(), gradual_steps);
+  EXPECT_GT(calls, 10) << "spread over calls";
+  // At most kApproachBudget steps in contact, or four times as many apart, a call.
+  EXPECT_LE(most_steps_in_a_call, 8);
+  EXPECT_EQ(arrived.status, contact::SolverStatus::kConverged);
+  EXPECT_EQ((arrived.device_translation_m - deep).norm(), 0.0);
   EXPECT_GT(pressed_n.z(), 10.0);
-  EXPECT_LT((first.contact_force_n - pressed_n).norm(), 0.02 * pressed_n.norm());
+  EXPECT_LT((arrived.contact_force_n - pressed_n).norm(), 0.02 * pressed_n.norm());
+  // The answers on the way rise as the tool presses in (friction lets none fall back).
+  EXPECT_LT(largest_drop_n, 1e-3 * pressed_n.norm());
   // Beside the bar (y beyond its side), 5 mm below its top: nothing there.
   TwoBodySession beside(model);
   const StepOutput& apart = beside.Step(Eigen::Vector3d(0, 0.025, -0.005));
   EXPECT_EQ(apart.approach_steps, 0);
+  EXPECT_FALSE(apart.approaching);
   EXPECT_EQ(apart.num_contacts, 0);
+}
+
+// The device may move while the approach runs: the approach presses in to the first pose,
+// then follows the device to its newest one in small steps, as a user would move; a reset
+// drops it.
+TEST(FreeInteractionTest, AnApproachFollowsTheDeviceAndEndsAtItsNewestPose) {
+  const TwoBodyModel model(BarScene(/*clamp_both_ends=*/true));
+  const Eigen::Vector3d deep(0, 0, -0.012), moved(0.003, 0, -0.010);
+  TwoBodySession gradual(model);
+  Eigen::Vector3d pressed_n = Eigen::Vector3d::Zero();
+  for (const Eigen::Vector3d& d : PolylinePath({{0, 0, 0}, deep, moved}, 1e-4)) {
+    pressed_n = gradual.Step(d).contact_force_n;
+  }
+  TwoBodySession opened(model);
+  for (int k = 0; k < 3; ++k) ASSERT_TRUE(opened.Step(deep).approaching);
+  int calls = 0;
+  while (opened.Step(moved).approaching) ASSERT_LT(++calls, 1000);
+  const StepOutput& arrived = opened.last_output();
+  EXPECT_EQ((arrived.device_translation_m - moved).norm(), 0.0);
+  EXPECT_GT(pressed_n.z(), 10.0);
+  EXPECT_LT((arrived.contact_force_n - pressed_n).norm(), 0.02 * pressed_n.norm())
+      << arrived.contact_force_n.transpose() << " against a gradual press " << pressed_n.transpose();
+  opened.Reset();
+  EXPECT_FALSE(opened.approaching());
+  EXPECT_TRUE(opened.Step(deep).approaching) << "a reset session approaches its first pose again";
 }
 
 // A scene whose contact.reach_m is shorter than where the device may go says so (the tool
