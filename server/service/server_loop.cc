@@ -23,6 +23,10 @@ constexpr dds_attach_t kPoseToken = 1;
 constexpr dds_attach_t kSessionToken = 2;
 // Rate limiting is per kind; each pose verdict is a kind of its own (kLogBadPose + verdict).
 enum LogKind { kLogClient = 0, kLogSession = 1, kLogFailure = 2, kLogIdentity = 3, kLogBadPose = 4, kLogKinds = kLogBadPose + 7 };
+// Log lines a kind may print at once; one more each second after. Session lines name a client
+// each and come in bunches (a failover moves every client of a server at once: with one a
+// second the log named 2 of 4 takeovers and the rest were "+2 similar suppressed").
+constexpr double kLogBurst = 1.0, kSessionLogBurst = 16.0;
 
 }  // namespace
 
@@ -48,6 +52,7 @@ ServerLoop::ServerLoop(std::vector<const sim::TwoBodyModel*> models, dds_domaini
       recorder_probe_(recorder_probe_publisher_, contact_topic_),
       waitset_(participant_),
       pool_(options.threads),
+      log_tokens_(kLogKinds, -1.0),
       last_log_ns_(kLogKinds, 0),
       suppressed_logs_(kLogKinds, 0) {
   if (models_.empty()) throw InputError("the server needs at least one scene");
@@ -648,18 +653,23 @@ void ServerLoop::Log(int kind, const std::string& message) {
   if (!options_.log) return;
   const auto k = static_cast<std::size_t>(kind);
   const int64_t now = MonotonicNowNs();
-  // At most one line per kind per second; the number of suppressed lines is reported.
-  if (last_log_ns_[k] != 0 && now - last_log_ns_[k] < 1'000'000'000LL) {
+  // A token bucket per kind (kLogBurst, kSessionLogBurst; one line a second on average): a
+  // flood of bad poses cannot flood the log. The number of suppressed lines is reported.
+  const double burst = kind == kLogSession ? kSessionLogBurst : kLogBurst;
+  double& tokens = log_tokens_[k];
+  tokens = tokens < 0 ? burst : std::min(burst, tokens + static_cast<double>(now - last_log_ns_[k]) * 1e-9);
+  last_log_ns_[k] = now;
+  if (tokens < 1.0) {
     ++suppressed_logs_[k];
     return;
   }
+  tokens -= 1.0;
   if (suppressed_logs_[k] > 0) {
     std::fprintf(stderr, "hapco-server: %s (+%llu similar suppressed)\n", message.c_str(),
                  static_cast<unsigned long long>(suppressed_logs_[k]));
   } else {
     std::fprintf(stderr, "hapco-server: %s\n", message.c_str());
   }
-  last_log_ns_[k] = now;
   suppressed_logs_[k] = 0;
 }
 

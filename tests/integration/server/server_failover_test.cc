@@ -444,6 +444,12 @@ TEST(ServerFailover, ThreeServersServeEachClientOnceAndTakeOverTheClientsOfOneTh
                             << " and " << id;
     }
   }
+  // Each server's log names every client it took over (they come at once: at one session line
+  // a second, a helper session's log named 2 of 4 takeovers).
+  for (const auto& [client, gap] : gap_ns) {
+    const std::string log = ReadFile(dir + "/server-" + seen[client].last_server + ".err");
+    EXPECT_NE(log.find("session opened for '" + client + "'"), std::string::npos) << log;
+  }
   // (Every stepped force this test's reader saw, the killed server's last ones included.)
   for (const auto& [client, s] : seen) {
     EXPECT_GT(s.answered_by.size(), 1000u) << client;
