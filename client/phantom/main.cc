@@ -185,7 +185,7 @@ int Run(const Options& o) {
               "  render latency (pose sampled -> rendering tick): p50 %.0f us, p99 %.0f us; server step+publish p50 %.0f us, p99 %.0f us\n"
               "  missed ticks %llu, stale ticks %llu, force timeouts %llu, resumed %llu, NaN forces %llu, clamped %llu, "
               "peak rendered force %.3f N, pose write errors %llu\n"
-              "  served by '%s' at the end, moved to another server %llu times; server leases lapsed %llu, came back %llu\n",
+              "  served by '%s' at the end, moved to another server %llu times; leases of any server on the domain lapsed %llu, came back %llu\n",
               o.client_id.c_str(), s.ticks_run, static_cast<unsigned long long>(s.poses_published),
               static_cast<unsigned long long>(s.forces_received), g_stop.load() ? " (stopped by signal)" : "",
               hapco::QuantileOf(s.round_trip_us, 0.5), hapco::QuantileOf(s.round_trip_us, 0.99), hapco::QuantileOf(s.round_trip_us, 0.999), hapco::QuantileOf(s.round_trip_us, 1.0),

@@ -88,11 +88,11 @@ int Run(const Options& o) {
       const double age_s = static_cast<double>(dds_time() - info.source_timestamp) * 1e-9;
       if (o.max_age_s > 0 && age_s > o.max_age_s) continue;
       const auto& c = status->counters;
-      char line[768];
+      char line[1024];
       std::snprintf(
           line, sizeof(line),
-          "hapco-status: server %s, domain %d, up %.1f s, %" PRIu32 " of %" PRIu32 " sessions, scenes %s, step p50 "
-          "%.0f us p99 %.0f us max %.0f us (mean per pose: physics %.0f, model %.0f, force write %.0f, contact "
+          "hapco-status: server %s, domain %d, up %.1f s, %" PRIu32 " of %" PRIu32 " sessions, scenes %s, pose "
+          "received to answered p50 %.0f us p99 %.0f us max %.0f us, queueing included (mean per pose: physics %.0f, model %.0f, force write %.0f, contact "
           "frame %.0f us), status age %.3f s; bad input: nan %" PRIu64 ", workspace %" PRIu64
           ", jumps %" PRIu64 ", out-of-order %" PRIu64 ", duplicates %" PRIu64 ", unknown clients %" PRIu64
           ", floods %" PRIu64,
