@@ -432,16 +432,37 @@ ImportedMesh ImportMeshWithGmsh(const MeshRequest& request, GmshSession* session
     }
   }
 
-  // Inverted or degenerate tetrahedra, named by their Gmsh tag (the user's file's numbering).
-  double largest_volume = 0.0;
-  for (int e = 0; e < num_elements; ++e) largest_volume = std::max(largest_volume, std::abs(fem::ElementVolume(mesh, e)));
+  // Inverted or degenerate tetrahedra, named by their Gmsh tag (the user's file's numbering)
+  // with their corners. Each is judged on its own size, its volume against its longest edge
+  // cubed (a regular one: 0.118): measured against the mesh's largest volume, one node at 1e300
+  // made an unrelated tetrahedron "degenerate", and a flat one with a volume of -1e-20 by
+  // round-off was called inverted (a helper session).
+  std::vector<std::size_t> tag_of_node(static_cast<std::size_t>(num_nodes));
+  for (const auto& [tag, node] : tag_to_node) tag_of_node[static_cast<std::size_t>(node)] = tag;
   for (int e = 0; e < num_elements; ++e) {
-    const double volume = fem::ElementVolume(mesh, e);
-    if (!(volume > 1e-12 * largest_volume)) {
-      Fail(path, "tetrahedron " + std::to_string(element_tags[static_cast<std::size_t>(e)]) + " is " +
-                     (volume < 0.0 ? "inverted (negative volume: its corners are in left-handed order)"
-                                   : "degenerate (zero volume)"));
+    double longest_m = 0.0;
+    for (int a = 0; a < 4; ++a) {
+      for (int b = a + 1; b < 4; ++b) {
+        longest_m = std::max(longest_m, (mesh.nodes_m.row(mesh.elements(e, a)) - mesh.nodes_m.row(mesh.elements(e, b))).norm());
+      }
     }
+    const double volume = fem::ElementVolume(mesh, e);
+    const double cube_m3 = longest_m * longest_m * longest_m;
+    const bool flat = !(std::abs(volume) > 1e-9 * cube_m3) || !std::isfinite(cube_m3);
+    if (!flat && volume > 0.0) continue;
+    std::string corners;
+    for (int a = 0; a < 4; ++a) {
+      const auto node = static_cast<Eigen::Index>(mesh.elements(e, a));
+      char text[160];
+      std::snprintf(text, sizeof(text), "%snode %zu at (%.6g, %.6g, %.6g) m", a == 0 ? "" : ", ",
+                    tag_of_node[static_cast<std::size_t>(node)], mesh.nodes_m(node, 0), mesh.nodes_m(node, 1),
+                    mesh.nodes_m(node, 2));
+      corners += text;
+    }
+    Fail(path, "tetrahedron " + std::to_string(element_tags[static_cast<std::size_t>(e)]) + " is " +
+                   (flat ? "degenerate (zero volume: its corners lie in one plane or far apart from each other)"
+                         : "inverted (negative volume: its corners are in left-handed order)") +
+                   "; corners " + corners);
   }
   try {
     fem::ValidateMesh(mesh);

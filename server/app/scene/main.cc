@@ -73,7 +73,7 @@ void PrintBody(const char* role, const hapco::sim::BodySpec& spec,
                 hapco::fem::ToString(box.order), box.divisions.x(), box.divisions.y(),
                 box.divisions.z());
   }
-  std::printf("          %d nodes, %d elements, %d dofs (%d free); E = %.4g MPa, nu = %.3g\n",
+  std::printf("          %d nodes, %d elements, %d dofs (%d free); E = %.4g MPa, nu = %.6g\n",
               body.mesh().num_nodes(), body.mesh().num_elements(), body.num_dofs(),
               body.num_free_dofs(), spec.material.youngs_modulus_pa * 1e-6,
               spec.material.poisson_ratio);

@@ -251,6 +251,21 @@ TEST_F(GmshMeshTest, InvertedAndDegenerateTetrahedraAreNamedByTheirTag) {
   flat_text.replace(flat_text.find("4 0 0 1"), 7, "4 1 1 0");  // node 4 in the plane of 1, 2, 3
   const std::string degenerate = ExpectRefused(Request(Write("flat.msh", flat_text), fem::ElementOrder::kTet4, 0));
   EXPECT_NE(degenerate.find("tetrahedron 7 is degenerate"), std::string::npos) << degenerate;
+  // Two tetrahedra (tags 7 and 8) sharing a face; the second one's fifth node is the one at
+  // fault. Flat by round-off (a tiny negative volume) is degenerate, not inverted; a node at
+  // 1e300 is named with its element, not blamed on the first one (both were, a helper session).
+  auto two = [](const char* fifth) {
+    return std::string("$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n5\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n5 ") +
+           fifth + "\n$EndNodes\n$Elements\n2\n7 4 2 0 1 1 2 3 4\n8 4 2 0 1 2 3 4 5\n$EndElements\n";
+  };
+  EXPECT_NEAR(TotalVolume(ImportMesh(Request(Write("two.msh", two("1 1 1")), fem::ElementOrder::kTet4, 0)).mesh),
+              1e-9 / 6.0 + 2e-9 / 6.0, 1e-18);
+  const std::string rounded = ExpectRefused(Request(
+      Write("rounded.msh", two("0.33333333333333 0.33333333333333 0.33333333333333")), fem::ElementOrder::kTet4, 0));
+  EXPECT_NE(rounded.find("tetrahedron 8 is degenerate"), std::string::npos) << rounded;
+  const std::string huge = ExpectRefused(Request(Write("huge.msh", two("1e300 1 1")), fem::ElementOrder::kTet4, 0));
+  EXPECT_NE(huge.find("tetrahedron 8 is degenerate"), std::string::npos) << huge;
+  EXPECT_NE(huge.find("node 5 at (1e+297, 0.001, 0.001) m"), std::string::npos) << huge;
   std::string nan_text = OneTetrahedron("1 2 3 4");
   nan_text.replace(nan_text.find("4 0 0 1"), 7, "4 0 nan 1");
   const std::string nan = ExpectRefused(Request(Write("nan.msh", nan_text), fem::ElementOrder::kTet4, 0));
