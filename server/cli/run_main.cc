@@ -7,11 +7,14 @@
 #include <string>
 
 #include "common/error.h"
+#include "common/progress.h"
 #include "common/version.h"
 
 namespace hapco::cli {
 
 int RunMain(const char* tool, const std::function<int()>& body) {
+  // The libraries' progress on long work (a large scene's precomputation) as "TOOL: line".
+  SetProgressSink([tool](const std::string& line) { std::fprintf(stderr, "%s: %s\n", tool, line.c_str()); });
   try {
     return body();
   } catch (const InputError& error) {

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <map>
 #include <optional>
@@ -11,6 +12,7 @@
 
 #include "common/error.h"
 #include "common/memory.h"
+#include "common/progress.h"
 #include "common/timer.h"
 
 namespace hapco::sim {
@@ -180,7 +182,23 @@ void ComputeBandedCompliance(const fem::ElasticBody& body, ContactSurface* surfa
   surface->far_bound_m_per_n.assign(static_cast<std::size_t>(n), 0.0);
   BlockedCompliance& c = surface->compliance_m_per_n;
   const int chunk = std::clamp(4'000'000 / std::max(1, 9 * n), 1, 64);  // ~32 MB of columns
+  // Minutes on a user's mesh with its whole boundary in contact (13 k surface nodes, 42 k-node
+  // body: more than 10 minutes with no output, a helper session): say what runs, and how far.
+  ReportProgress("obstacle compliance: " + std::to_string(n) + " contact surface nodes, stored within " +
+                 std::to_string(surface->range_m) + " m of each other, by solves with the body's factor; " +
+                 "obstacle.mesh.contact_groups naming only the faces a tool can touch makes this shorter");
+  const Stopwatch watch;
+  double last_report_s = 0.0;
   body.ForEachComplianceColumnChunk(surface->nodes, chunk, [&](int first, int count, const Eigen::MatrixXd& columns) {
+    const double elapsed_s = watch.ElapsedSeconds();
+    if (elapsed_s - last_report_s >= 10.0) {
+      last_report_s = elapsed_s;
+      const double done = static_cast<double>(first + count) / n;
+      char line[160];
+      std::snprintf(line, sizeof(line), "obstacle compliance: %d of %d nodes (%.0f %%) in %.0f s, about %.0f s left",
+                    first + count, n, 100.0 * done, elapsed_s, elapsed_s * (1.0 - done) / done);
+      ReportProgress(line);
+    }
     for (int k = 0; k < count; ++k) {
       const int j = first + k;
       double& far = surface->far_bound_m_per_n[static_cast<std::size_t>(j)];
@@ -196,12 +214,18 @@ void ComputeBandedCompliance(const fem::ElasticBody& body, ContactSurface* surfa
   });
 }
 
-void ComputeCompliance(const fem::ElasticBody& body, ContactSurface* surface) {
+void ComputeCompliance(const fem::ElasticBody& body, const std::string& name, ContactSurface* surface) {
   // Computed in the blocked layout's own storage and reordered there: the precomputation's
   // peak is the operator (and the body's factor), not the operator twice.
   if (surface->range_axis >= 0) {
     ComputeBandedCompliance(body, surface);
   } else {
+    if (surface->nodes.size() >= 2000) {  // (3n)^3 / 3 flops: 2 000 nodes take seconds, 7 000 minutes
+      ReportProgress(name + " compliance: " + std::to_string(surface->nodes.size()) +
+                     " contact surface nodes, dense, from a Schur complement of order " +
+                     std::to_string(3 * surface->nodes.size()) + "; " + name +
+                     ".mesh.contact_groups naming only the faces that can touch makes this shorter");
+    }
     surface->compliance_m_per_n = BlockedCompliance::FromDenseInPlace(
         static_cast<int>(surface->nodes.size()), [&](double* dense) { body.ComplianceBlockInto(surface->nodes, dense); });
   }
@@ -489,8 +513,8 @@ TwoBodyModel::TwoBodyModel(Parts parts)
   }
 
   Stopwatch compliance;
-  ComputeCompliance(obstacle_, &obstacle_surface_);
-  ComputeCompliance(tool_, &tool_surface_);
+  ComputeCompliance(obstacle_, "obstacle", &obstacle_surface_);
+  ComputeCompliance(tool_, "tool", &tool_surface_);
   stats_.compliance_seconds = compliance.ElapsedSeconds();
   // A large surface's dense Schur factor stays in its body's factor as large as its compliance
   // blocks, for nothing the step needs: factor once more without it (ElasticBody::

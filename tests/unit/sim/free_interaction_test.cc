@@ -12,8 +12,10 @@
 #include <random>
 #include <sstream>
 #include <string>
+#include <vector>
 
 #include "common/error.h"
+#include "common/progress.h"
 #include "io/scene_file.h"
 #include "sim/device_path.h"
 #include "sim/step_pipeline.h"
@@ -199,9 +201,18 @@ TEST(FreeInteractionTest, OversizedOperatorsAreBandedOrRefusedBeforeAllocation) 
 TEST(FreeInteractionTest, BandedComplianceHoldsTheDensePairsAndGivesTheDenseForces) {
   SceneSpec banded_scene = BarScene(true, fem::ElementOrder::kTet10);
   banded_scene.compliance_range_m = 0.04;
+  // The solves can take minutes on a user's mesh: the tools are told what runs (progress.h).
+  std::vector<std::string> progress;
+  SetProgressSink([&](const std::string& line) { progress.push_back(line); });
   const TwoBodyModel dense(BarScene(true, fem::ElementOrder::kTet10)), banded(banded_scene);
+  SetProgressSink({});
   const ContactSurface& d = dense.obstacle_surface();
   const ContactSurface& b = banded.obstacle_surface();
+  ASSERT_EQ(progress.size(), 1u) << "the dense one is small: no line";
+  EXPECT_EQ(progress[0].find("obstacle compliance: " + std::to_string(b.nodes.size()) +
+                             " contact surface nodes, stored within 0.04"),
+            0u)
+      << progress[0];
   ASSERT_EQ(b.range_axis, 0);
   ASSERT_EQ(d.nodes.size(), b.nodes.size());
   const auto& x = banded.obstacle().mesh().nodes_m;
