@@ -127,6 +127,7 @@ class ServerLoop {
     int64_t last_heard_ns = 0;
     // Filled by the stepping job, read by the server thread after the batch.
     PendingPoses stepped;
+    int superseded_while_approaching = 0;  // queued poses left out of this batch (StepQueued)
     std::array<int64_t, kMaxQueuedPoses> step_ns{};
     std::array<Eigen::Vector3d, kMaxQueuedPoses> sent_force_n{};
   };

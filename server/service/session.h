@@ -120,6 +120,9 @@ class Session {
     return t;
   }
   const sim::StepOutput& last_output() const { return sim_.last_output(); }
+  // The session's first pose was deep inside and its approach is still on the way
+  // (sim::TwoBodySession::Step): only the newest pose matters then.
+  bool approaching() const { return sim_.approaching(); }
   const sim::TwoBodyModel& model() const { return sim_.model(); }  // this session's scene
   uint64_t last_sequence() const { return stream_.last() ? stream_.last()->sequence : 0; }
   const Eigen::Vector3d& last_force_n() const { return last_good_force_n_; }  // last sent, N
