@@ -117,21 +117,29 @@ int Run(const Options& options) {
     const ClientSummary& c = clients[id];
     std::string sessions;
     unsigned long long gaps = 0;  // steps the servers made that are not in the file
-    unsigned long long before = 0;  // of them, steps before the session's first recorded one
+    // Of them, steps before a session's first recorded one. A session counts its steps from 1,
+    // so these are missing too: in the client's first session, the recording may have begun
+    // after them; in a later one it was running, so they were lost (a helper session saw a
+    // moved client's step 1 reported as "before the recording began", 12 s into it).
+    unsigned long long before = 0, lost_at_start = 0;
     for (const hapco::io::RecordedSession& s : c.sessions.sessions()) {
+      (sessions.empty() ? before : lost_at_start) += s.before_first();
       sessions += (sessions.empty() ? "" : ", ") + std::to_string(s.first_step) + ".." + std::to_string(s.last_step);
       if (!s.server_id.empty()) sessions += " on " + s.server_id;
       gaps += s.missing;
-      // A session counts its steps from 1: the recorder counts those before its first recorded
-      // step as missing too (it started after them).
-      before += s.before_first();
     }
     const std::size_t count = c.sessions.sessions().size();
     std::string before_text;
-    if (before > 0) before_text = " (" + std::to_string(before) + " of them before the recording began)";
+    if (before > 0) before_text = std::to_string(before) + " of them before the recording began or lost at its start";
+    if (lost_at_start > 0) {
+      before_text += (before_text.empty() ? "" : ", ") + std::to_string(lost_at_start) +
+                     " lost at the start of a later session";
+    }
+    if (!before_text.empty()) before_text = " (" + before_text + ")";
     std::printf("client     %s: %ld steps in %zu session%s (%s), %llu not in the file%s, %ld without contacts "
                 "(frame lost)\n",
-                id.c_str(), c.steps, count, count == 1 ? "" : "s", sessions.c_str(), gaps + before, before_text.c_str(),
+                id.c_str(), c.steps, count, count == 1 ? "" : "s", sessions.c_str(), gaps + before + lost_at_start,
+                before_text.c_str(),
                 c.without_contacts);
   }
   // Offline recordings time every step; online ones carry the server's pose-in -> force-out.
