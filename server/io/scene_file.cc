@@ -293,6 +293,11 @@ class SceneChecker {
     namespace fs = std::filesystem;
     fs::path file(mesh.file());
     if (file.is_relative()) file = fs::path(source_).parent_path() / file;
+    if (mesh.mesh_size() > 0.0 && file.extension() == ".msh") {
+      // (It was ignored without a word: a user changed it and saw the same mesh; a helper.)
+      Fail(mesh_path, mesh, mesh_tree, "mesh_size",
+           "sizes the meshing of a .geo; a .msh is read as it is: remove mesh_size, or give the .geo to mesh it");
+    }
     mesh_import::MeshRequest request;
     request.path = file.lexically_normal().string();
     request.order = spec->box.order;
@@ -314,7 +319,9 @@ class SceneChecker {
         for (const auto& [known_name, nodes] : imported.group_nodes) known += (known.empty() ? "" : ", ") + known_name;
         Fail(mesh_path, mesh, mesh_tree, field,
              "physical group '" + name + "' is not in " + request.path +
-                 (known.empty() ? " (it has no physical groups)" : " (it has: " + known + ")"),
+                 (known.empty() ? " (it has no physical groups on its elements: define them in the .geo; a .msh "
+                                  "saved with -save_all or Mesh.SaveAll drops them in MSH 2, so save it without)"
+                                : " (it has: " + known + ")"),
              index);
       }
       if (found->second.empty()) {

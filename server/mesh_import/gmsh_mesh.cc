@@ -165,7 +165,12 @@ class GmshSession {
       if (line.rfind("Error", 0) == 0) {
         std::string message = line.substr(line.find(':') == std::string::npos ? 0 : line.find(':') + 1);
         while (!message.empty() && message.front() == ' ') message.erase(message.begin());
-        Fail(path, "Gmsh could not " + doing + ": " + message);
+        // Gmsh says only that loading failed for a file cut short or with wrong counts.
+        const bool bare = message.rfind("Error loading", 0) == 0 || message.empty();
+        Fail(path, "Gmsh could not " + doing + ": " + message +
+                       (bare ? " (is the file complete, and do its $Nodes and $Elements counts match its lines? "
+                               "Run `gmsh FILE -check` for details)"
+                             : ""));
       }
     }
   }
@@ -370,10 +375,15 @@ ImportedMesh ImportMeshWithGmsh(const MeshRequest& request, GmshSession* session
     if (type != wanted_type) others += (others.empty() ? "" : ", ") + ElementTypeName(type);
   }
   if (std::find(types.begin(), types.end(), wanted_type) == types.end()) {
+    // The other order's tetrahedra: the fix is the scene's element_order (or meshing again).
+    const bool tet10 = request.order == fem::ElementOrder::kTet10;
+    const int other_order_type = GmshTetrahedronType(tet10 ? fem::ElementOrder::kTet4 : fem::ElementOrder::kTet10);
+    const bool other_order = std::find(types.begin(), types.end(), other_order_type) != types.end();
+    std::string fix;
+    if (other_order) fix = tet10 ? "; set element_order: TET4, or mesh with order 2" : "; set element_order: TET10";
     Fail(path, std::string("holds no ") + fem::ToString(request.order) + " tetrahedra (Gmsh type " +
                    std::to_string(wanted_type) + ")" +
-                   (others.empty() ? ": it has no volume elements (mesh it in 3-D)" : "; it has " + others) +
-                   (request.order == fem::ElementOrder::kTet10 ? "; set element_order: TET4 or mesh with order 2" : ""));
+                   (others.empty() ? ": it has no volume elements (mesh it in 3-D)" : "; it has " + others) + fix);
   }
   if (!others.empty()) {
     Fail(path, "mixes other volume elements with the " + std::string(fem::ToString(request.order)) +

@@ -608,4 +608,19 @@ std::string ContactGroupsNote(const TwoBodyModel& model) {
   return note.str();
 }
 
+std::string LockingNote(const TwoBodyModel& model) {
+  std::string note;
+  for (const auto& [name, body] : {std::pair<const char*, const BodySpec*>{"obstacle", &model.scene().obstacle},
+                                   std::pair<const char*, const BodySpec*>{"tool", &model.scene().tool}}) {
+    if (body->box.order != fem::ElementOrder::kTet4 || body->material.poisson_ratio <= 0.45) continue;
+    char text[320];
+    std::snprintf(text, sizeof(text),
+                  "%sthe %s has Tet4 elements and Poisson's ratio %.6g: linear tetrahedra lock when nearly "
+                  "incompressible and come out far too stiff (set its element_order: TET10)",
+                  note.empty() ? "" : "; ", name, body->material.poisson_ratio);
+    note += text;
+  }
+  return note;
+}
+
 }  // namespace hapco::sim

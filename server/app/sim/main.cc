@@ -298,7 +298,8 @@ int Run(const Options& options) {
               model.obstacle_candidates().size(), model.tool_candidates().size(), setup.ElapsedSeconds(),
               model_stats.build_seconds, model_stats.compliance_seconds,
               static_cast<double>(model_stats.operator_bytes) / (1 << 20));
-  for (const std::string& note : {hapco::sim::StartingPositionNote(model), hapco::sim::ContactGroupsNote(model)}) {
+  for (const std::string& note : {hapco::sim::StartingPositionNote(model), hapco::sim::ContactGroupsNote(model),
+                                  hapco::sim::LockingNote(model)}) {
     if (!note.empty()) std::printf("note: %s\n", note.c_str());
   }
   hapco::sim::TwoBodySession session(
@@ -417,6 +418,7 @@ int Run(const Options& options) {
       ++ignored[hapco::sim::VerdictName(verdict)];
       continue;
     }
+    const bool session_starts = !last_pose.has_value();
     last_pose = hapco::sim::AcceptedPose{sequence, pose_m};
     const int phase = file_points.empty() ? scene.PhaseOfStep(step) : 0;
     if (multirate) {
@@ -445,6 +447,12 @@ int Run(const Options& options) {
       std::printf("note: the first pose has the tool %.3g mm from home and inside the obstacle: approached from "
                   "home first (lift, across, press in along the start's contact normal, a few 0.1 mm steps a "
                   "pose, as on a server); until it arrives, each pose's row has the force at the pose reached\n",
+                  pose_m.norm() * 1e3);
+    }
+    if (session_starts && out.approach_steps == 0 && pose_m.norm() > 2e-3) {
+      // (A 50 mm first step straight through a 10 mm beam gave 0 N without a word: a helper.)
+      std::printf("note: the first pose is %.3g mm from home with the tool outside the obstacle: the session starts "
+                  "there, as on a server; the way from home is not simulated\n",
                   pose_m.norm() * 1e3);
     }
     if (approach_poses > 0 && !out.approaching) {

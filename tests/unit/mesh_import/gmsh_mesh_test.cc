@@ -181,6 +181,19 @@ TEST_F(GmshMeshTest, MshFileIsReadAndItsElementOrderMustMatch) {
   const std::string message = ExpectRefused(Request(meshed.meshed_file, fem::ElementOrder::kTet10, 0.0));
   EXPECT_NE(message.find("holds no Tet10 tetrahedra"), std::string::npos) << message;
   EXPECT_NE(message.find("Tetrahedron 4 (type 4)"), std::string::npos) << message;
+  EXPECT_NE(message.find("set element_order: TET4"), std::string::npos) << message;
+  // And a second-order file read as Tet4 says which order it is (it did not: a helper session).
+  const ImportedMesh quadratic = ImportMesh(Request(BarGeo(), fem::ElementOrder::kTet10, 5.0));
+  const std::string reverse = ExpectRefused(Request(quadratic.meshed_file, fem::ElementOrder::kTet4, 0.0));
+  EXPECT_NE(reverse.find("holds no Tet4 tetrahedra"), std::string::npos) << reverse;
+  EXPECT_NE(reverse.find("set element_order: TET10"), std::string::npos) << reverse;
+}
+
+// A hand-written MSH 2.2 file with one tetrahedron, corners in the given order.
+std::string OneTetrahedron(const char* corners) {
+  return std::string("$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n4\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n$EndNodes\n"
+                     "$Elements\n1\n7 4 2 0 1 ") +
+         corners + "\n$EndElements\n";
 }
 
 TEST_F(GmshMeshTest, BadFilesAreRefusedWithOneLineNamingTheFileAndTheFault) {
@@ -191,6 +204,12 @@ TEST_F(GmshMeshTest, BadFilesAreRefusedWithOneLineNamingTheFileAndTheFault) {
   const std::string syntax = ExpectRefused(Request(Write("broken.geo", "Box(1) = {0, 0;\n"), fem::ElementOrder::kTet4, 1));
   EXPECT_NE(syntax.find("Gmsh could not read it"), std::string::npos) << syntax;
   EXPECT_NE(syntax.find("line 1: syntax error"), std::string::npos) << syntax;
+  // A .msh cut short: Gmsh says only "Error loading"; the message says what to look at.
+  std::string cut = OneTetrahedron("1 2 3 4");
+  cut.resize(cut.find("$EndElements") - 4);  // inside the element's line
+  const std::string truncated = ExpectRefused(Request(Write("cut.msh", cut), fem::ElementOrder::kTet4, 0));
+  EXPECT_NE(truncated.find("Gmsh could not read it"), std::string::npos) << truncated;
+  EXPECT_NE(truncated.find("is the file complete"), std::string::npos) << truncated;
   const std::string flat = ExpectRefused(Request(Write("flat.geo",
                                                        "SetFactory(\"OpenCASCADE\");\nRectangle(1) = {0, 0, 0, 10, 10};\n"),
                                                  fem::ElementOrder::kTet4, 2));
@@ -232,13 +251,6 @@ TEST_F(GmshMeshTest, ExitCommandIsRefusedWithItsLineInsteadOfEndingTheProgram) {
   const MeshRequest computed = Request(Write("computed.geo", box + "Include StrCat(\"ta\", \"il.geo\");\n"),
                                        fem::ElementOrder::kTet4, 5);
   EXPECT_EXIT(ImportMesh(computed), ::testing::ExitedWithCode(1), "Gmsh ended the program while reading it");
-}
-
-// A hand-written MSH 2.2 file with one tetrahedron, corners in the given order.
-std::string OneTetrahedron(const char* corners) {
-  return std::string("$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n4\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n$EndNodes\n"
-                     "$Elements\n1\n7 4 2 0 1 ") +
-         corners + "\n$EndElements\n";
 }
 
 TEST_F(GmshMeshTest, InvertedAndDegenerateTetrahedraAreNamedByTheirTag) {

@@ -459,6 +459,20 @@ TEST(FreeInteractionTest, AnApproachFollowsTheDeviceAndEndsAtItsNewestPose) {
   EXPECT_TRUE(opened.Step(deep).approaching) << "a reset session approaches its first pose again";
 }
 
+// Tet4 bodies lock when nearly incompressible (a helper session's cantilever at Poisson's ratio
+// 0.4999 came out 18 times stiffer than at 0.3, without a word): the tools say so.
+TEST(FreeInteractionTest, NearlyIncompressibleTet4BodiesAreNoted) {
+  SceneSpec scene = BarScene(/*clamp_both_ends=*/true, fem::ElementOrder::kTet4, {4, 2, 2});
+  EXPECT_EQ(LockingNote(TwoBodyModel(scene)), "");
+  scene.obstacle.material.poisson_ratio = 0.49;
+  const std::string note = LockingNote(TwoBodyModel(scene));
+  EXPECT_NE(note.find("the obstacle has Tet4 elements and Poisson's ratio 0.49:"), std::string::npos) << note;
+  EXPECT_NE(note.find("TET10"), std::string::npos) << note;
+  EXPECT_EQ(note.find("the tool"), std::string::npos) << note;
+  scene.obstacle.box.order = fem::ElementOrder::kTet10;
+  EXPECT_EQ(LockingNote(TwoBodyModel(scene)), "") << "Tet10 does not lock";
+}
+
 // A scene whose contact.reach_m is shorter than where the device may go says so (the tool
 // passes through faces beyond it: a helper session's 5 mm reach slid 28 mm, 13.1 N where
 // 41.0 N is right, without a word).

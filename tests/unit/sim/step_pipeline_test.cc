@@ -255,13 +255,19 @@ TEST(PipelineTest, BroadPhaseLeavesOutFacesNoToolNodeCanFace) {
 // back. Frictionless contact is path independent up to the contact pairing: the big step
 // pairs the tool nodes with the undeformed surface, so its first force is close (3 %), and
 // holding the device still re-pairs on the deformed surface and stays within 1 % of the
-// small steps (measured 0.6 %: node-to-face pairing is not unique, a known limit).
+// small steps (measured 0.6 %: node-to-face pairing is not unique, a known limit). A first
+// pose this deep (more than 2 mm from home, inside) is reached by an approach spread over the
+// next calls (TwoBodySession::Step): the big step is the call that arrives.
 TEST(PipelineTest, LargeIncrementIsDetectedAndMatchesSmallSteps) {
   const TwoBodyModel model(CoarseScene(fem::ElementOrder::kTet4, 0.0));
   TwoBodySession small_steps(model), one_step(model);
   StepOutput expected;
   for (int step = 1; step <= 6; ++step) expected = small_steps.Step(model.scene().DeviceTranslationAtStep(step));
-  const StepOutput big = one_step.Step(model.scene().DeviceTranslationAtStep(6));
+  StepOutput big = one_step.Step(model.scene().DeviceTranslationAtStep(6));
+  for (int call = 0; big.approaching; ++call) {
+    ASSERT_LT(call, 100) << "the approach never arrives";
+    big = one_step.Step(model.scene().DeviceTranslationAtStep(6));
+  }
   ASSERT_GT(big.num_contacts, 0);
   EXPECT_GT(expected.contact_force_n.z(), 1.0);
   EXPECT_LT((big.contact_force_n - expected.contact_force_n).norm(), 0.03 * expected.contact_force_n.norm());
