@@ -125,7 +125,7 @@ class TwoBodySession {
   // Runs one step for the device translation d (m, from the device's home position).
   // A session's first step at a pose more than 2 mm from home with the tool inside the
   // obstacle (TwoBodyModel::ToolInsideObstacle) starts an approach from home in small steps
-  // (1 mm apart, 0.1 mm in contact): lift 1 mm along the start's contact normal, across, then
+  // (1 mm apart, 0.25 mm in contact): lift 1 mm along the start's contact normal, across, then
   // press in along it (TwoBodyModel::approach_normal) to that pose, then follow the device in
   // the same steps if it has moved meanwhile. Detection without
   // history finds contacts only within half a body's thickness, and a client resumed mid-press

@@ -445,7 +445,7 @@ int Run(const Options& options) {
     const auto& out = session.last_output();
     if (out.approach_steps > 0 && approach_poses++ == 0) {
       std::printf("note: the first pose has the tool %.3g mm from home and inside the obstacle: approached from "
-                  "home first (lift, across, press in along the start's contact normal, a few 0.1 mm steps a "
+                  "home first (lift, across, press in along the start's contact normal, a few 0.25 mm steps a "
                   "pose, as on a server); until it arrives, each pose's row has the force at the pose reached\n",
                   pose_m.norm() * 1e3);
     }
