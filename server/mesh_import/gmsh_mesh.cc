@@ -19,6 +19,7 @@
 
 #include "common/error.h"
 #include "common/hash.h"
+#include "common/progress.h"
 
 namespace hapco::mesh_import {
 namespace {
@@ -239,6 +240,13 @@ void MeshGeo(const MeshRequest& request, GmshSession* session) {
             << " nodes (bounding box " << x1 - x0 << " x " << y1 - y0 << " x " << z1 - z0
             << " file units), more than the " << request.max_nodes << " allowed; use a larger mesh_size";
     Fail(request.path, message.str());
+  }
+  if (nodes > 1e5) {
+    // (A helper's .geo meshed for 59 s without a word, then was refused for its memory.)
+    std::ostringstream line;
+    line << "meshing " << request.path << " with mesh_size " << h << ": about " << static_cast<long long>(nodes)
+         << " nodes, which can take a minute or more (its memory is judged after meshing)";
+    ReportProgress(line.str());
   }
   gmsh::option::setNumber("Mesh.MeshSizeMax", h);
   gmsh::model::mesh::generate(3);
