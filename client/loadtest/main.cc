@@ -70,8 +70,9 @@ bool Parse(int argc, char** argv, Options* o) {
       ->required(false);
   command.AddInteger("--clients", &o->clients, "N", "emulated devices, 1..100 (required)", "Run", 1, 100);
   command.AddDuration(&o->duration_s, "seconds each client runs (required)");
-  command.AddNumber("--stagger-ms", &o->stagger_ms, "M", "client i starts i*M ms after client 0 (default 100)",
-                    "Run", 0, HUGE_VAL);
+  // (1e9 was taken and the run waited for a client due in 11 days.)
+  command.AddNumber("--stagger-ms", &o->stagger_ms, "M",
+                    "client i starts i*M ms after client 0, at most 60000 (default 100)", "Run", 0, 60000);
   command.AddText("--trajectory", &o->trajectory, "T",
                   "scene (default: the scene's phases, one step per tick) or a CSV file, one row per tick, columns "
                   "x_m,y_m,z_m or dx_m,dy_m,dz_m found by header name (as hapco-phantom --trajectory)",

@@ -323,7 +323,9 @@ CLI::Option* CommandLine::AddAndersonDepth(int* depth, const std::string& defaul
 }
 
 CLI::Option* CommandLine::AddConnectTimeout(double* seconds, const std::string& help) {
-  return AddNumber("--connect-timeout-s", seconds, "S", help, kGroupDds, 0, HUGE_VAL, true);
+  // At most kMaxDurationS, as --duration-s: seconds become int64 nanoseconds (1e12 s overflowed
+  // and gave up at once, "within 1000000000000.0 s").
+  return AddNumber("--connect-timeout-s", seconds, "S", help, kGroupDds, 0, kMaxDurationS, true);
 }
 
 CLI::Option* CommandLine::AddForceTimeout(double* milliseconds) {
@@ -354,8 +356,9 @@ void CommandLine::AddRendering(std::string* mode, double* max_model_stiffness_n_
 
 CLI::Option* CommandLine::AddDuration(double* seconds, const std::string& help) {
   // At most 10^6 s (11.6 days): a tick count of 1 kHz runs fits an int32 (2.2e6 s overflowed
-  // it: "the number of ticks must be positive"; 1e10 s made the recorder stop at once).
-  return AddNumber("--duration-s", seconds, "S", help, "Run", 0, kMaxDurationS, true);
+  // it: "the number of ticks must be positive"; 1e10 s made the recorder stop at once). At
+  // least one 1 kHz tick (0.0001 s passed here and failed later with that same message).
+  return AddNumber("--duration-s", seconds, "S", help, "Run", 1e-3, kMaxDurationS);
 }
 
 CLI::Option* CommandLine::AddSecurity(std::string* dir, const std::string& who) {
@@ -369,6 +372,7 @@ CLI::Option* CommandLine::AddSecurity(std::string* dir, const std::string& who) 
   return app_.add_option("--security", *dir,
                          "secured DDS (authentication, access control, encryption) with the deployment made by "
                          "scripts/dds-security init DIR; this tool runs as " + who + " (docs/security.md)")
+      ->check(not_empty)  // ("" ran unsecured without a word: an unset $DIR turned security off)
       ->group(kGroupDds);
 }
 
@@ -412,7 +416,13 @@ bool CommandLine::Parse(std::vector<std::string> arguments) {
   std::vector<std::string> rewritten;
   bool options_ended = false;
   for (const std::string& argument : arguments) {
-    if (argument == "--") options_ended = true;
+    if (argument == "--" && !options_ended) {
+      // Ends the options (POSIX). CLI11, as set up here, left it over as an unknown option; what
+      // follows is still read by the parser, so an argument after it that starts with '-' is
+      // taken as an option (none of HapCo's positionals needs that).
+      options_ended = true;
+      continue;
+    }
     if (!options_ended) {
       const std::string name = argument.substr(0, argument.find('='));
       const auto old = deprecated_.find(name);

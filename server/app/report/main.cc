@@ -247,6 +247,10 @@ int Run(const Options& options) {
     hapco::CloseOutputFile(csv, csv_path);
     std::printf("csv        %s\n", csv_path.c_str());
   }
+  if (!plots_dir.empty() && steps.empty()) {
+    // (The chart script failed on it, and the message blamed matplotlib: a helper session.)
+    throw hapco::InputError("--plots: the recording holds no steps to chart");
+  }
   if (!plots_dir.empty()) {
     const char* env = std::getenv("HAPCO_SCRIPTS_DIR");
     const std::string scripts = env != nullptr ? env : HAPCO_DEFAULT_SCRIPTS_DIR;

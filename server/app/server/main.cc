@@ -8,6 +8,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <memory>
 #include <string>
 #include <vector>
@@ -91,13 +92,15 @@ bool Parse(int argc, char** argv, Options* options) {
                   "(docs/several-servers.md)",
                   hapco::cli::kGroupDds);
   command.AddNumber("--status-period-s", &options->server.status_period_s, "S",
-                    "ServerStatus period, s (default 1)", hapco::cli::kGroupDds, 0, HUGE_VAL, true);
+                    "ServerStatus period, s (default 1)", hapco::cli::kGroupDds, 0,
+                    hapco::cli::CommandLine::kMaxDurationS, true);
   command.AddInteger("--max-sessions", &options->server.max_sessions, "N",
                      "open sessions at most (default 16); further clients are refused", "Sessions", 1, 1000);
   command.AddNumber("--session-idle-s", &options->server.session_idle_s, "S",
                     "close a session after S s without a pose or session message from its client (a client "
                     "killed without leaving would hold its slot for good); 0 = never (default 5)",
-                    "Sessions", 0, HUGE_VAL);
+                    // (1e12 overflowed to "nothing heard for 0.0 s" and closed every session.)
+                    "Sessions", 0, hapco::cli::CommandLine::kMaxDurationS);
   command.AddInteger("--threads", &options->server.threads, "N",
                      "threads stepping sessions, the server thread included (default: one per online core); "
                      "sessions that got a pose in the same tick are stepped in parallel, each worker publishing "
@@ -163,14 +166,27 @@ int Run(const Options& options) {
   std::vector<std::unique_ptr<hapco::sim::TwoBodyModel>> models;
   std::vector<const hapco::sim::TwoBodyModel*> served;
   std::string scenes_line;
+  // The scene files first (parsing and any meshing), so that two scenes of one name are refused
+  // before either is prepared (they were refused after both were: seconds to minutes).
+  std::vector<hapco::sim::SceneSpec> scenes;
+  std::map<std::string, std::string> path_of_name;
   for (const std::string& path : options.scene_paths) {
+    scenes.push_back(hapco::io::LoadSceneFile(path));
+    const auto [named, fresh] = path_of_name.emplace(scenes.back().name, path);
+    if (!fresh) {
+      throw hapco::InputError("scenes " + named->second + " and " + path + " are both named '" + named->first +
+                              "': clients choose a scene by its name, so names must differ");
+    }
+  }
+  for (std::size_t k = 0; k < options.scene_paths.size(); ++k) {
+    const std::string& path = options.scene_paths[k];
     // A mesh scene at ~100k dofs takes seconds to prepare: say what the server is doing.
     if (options.server.log) {
       std::printf("hapco-server: preparing scene %s (meshing, factorization, contact compliance)\n", path.c_str());
       std::fflush(stdout);
     }
     hapco::Stopwatch scene_watch;
-    models.push_back(hapco::io::MakeSceneModel(hapco::io::LoadSceneFile(path), path));
+    models.push_back(hapco::io::MakeSceneModel(std::move(scenes[k]), path));
     served.push_back(models.back().get());
     if (options.server.log) {
       const hapco::sim::TwoBodyModelStats& stats = models.back()->stats();

@@ -12,7 +12,7 @@ namespace {
 
 // A small tool with one option of each kind, as the executables define them.
 struct ToyOptions {
-  std::string scene, output, solver = "reference";
+  std::string scene, output, solver = "reference", security;
   double tol = 1e-6, duration_s = 1;
   int steps = 0, domain = 0;
   bool quiet = false;
@@ -30,6 +30,7 @@ void DefineToy(CommandLine& command, ToyOptions* options) {
   command.AddInteger("--steps", &options->steps, "N", "steps", "Run", 1, 100);
   command.AddDuration(&options->duration_s, "how long");
   command.AddQuiet(&options->quiet, "no progress");
+  command.AddSecurity(&options->security, "a toy");
   command.Deprecate("--record", "--output");
   command.Deprecate("--scene", "");
 }
@@ -67,9 +68,15 @@ TEST(CommandLineTest, BadInputNamesTheOptionAndTheRange) {
   EXPECT_EQ(ErrorOf({"s", "--steps", "3.5"}), "--steps expects an integer in [1, 100], got '3.5'");
   EXPECT_EQ(ErrorOf({"s", "--tol", "nan"}), "--tol expects a number, got 'nan'");
   EXPECT_EQ(ErrorOf({"s", "--tol", "0"}), "--tol expects a number > 0, got '0'");
-  EXPECT_EQ(ErrorOf({"s", "--duration-s", "-5"}), "--duration-s expects a number in (0, 1e+06], got '-5'");
-  // Beyond 10^6 s a 1 kHz tick count overflowed (2.2e6 s: "the number of ticks must be positive").
-  EXPECT_EQ(ErrorOf({"s", "--duration-s", "2.2e6"}), "--duration-s expects a number in (0, 1e+06], got '2.2e6'");
+  EXPECT_EQ(ErrorOf({"s", "--duration-s", "-5"}), "--duration-s expects a number in [0.001, 1e+06], got '-5'");
+  // Beyond 10^6 s a 1 kHz tick count overflowed (2.2e6 s: "the number of ticks must be positive"),
+  // and below one tick there was no tick (0.0001 s: the same message, later).
+  EXPECT_EQ(ErrorOf({"s", "--duration-s", "2.2e6"}), "--duration-s expects a number in [0.001, 1e+06], got '2.2e6'");
+  EXPECT_EQ(ErrorOf({"s", "--duration-s", "0.0001"}), "--duration-s expects a number in [0.001, 1e+06], got '0.0001'");
+  // An empty --security ran unsecured without a word (an unset $DIR; a helper session).
+  EXPECT_EQ(ErrorOf({"s", "--security", ""}), "--security needs the deployment's folder (leave it out for no security)");
+  // "--" ends the options (it was "unknown option --").
+  EXPECT_EQ(ErrorOf({"--steps", "3", "--", "s"}), "");
   EXPECT_EQ(ErrorOf({"s", "--domain", "231"}), "--domain expects an integer in [0, 230], got '231'");
   EXPECT_EQ(ErrorOf({"s", "--solver", "newton"}),
             "--solver expects local-uzawa | global-uzawa-gs | global-uzawa-jacobi | reference, got 'newton'");
