@@ -42,6 +42,8 @@ struct ServerForce {
 class ClientRecorder {
  public:
   explicit ClientRecorder(int max_ticks);
+  // What the constructor reserves per tick, bytes.
+  static constexpr std::size_t kBytesPerTick = sizeof(TickSample) + sizeof(ServerForce);
   void OnTick(const phantom::TickRecord& record);
 
   const std::vector<TickSample>& ticks() const { return ticks_; }

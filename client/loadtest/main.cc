@@ -16,6 +16,7 @@
 #include <limits>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
@@ -23,6 +24,7 @@
 #include "cli/command_line.h"
 #include "cli/run_main.h"
 #include "common/error.h"
+#include "common/memory.h"
 #include "common/realtime.h"
 #include "common/statistics.h"
 #include "io/scene_file.h"
@@ -379,6 +381,23 @@ int Run(const Options& o) {
   base.drain_ticks = static_cast<int>(std::lround(o.timeout_ms));
   base.render = o.rendering;
   const double tick_s = base.safety.tick_s;
+  {
+    // Every tick of every client is kept (allocated up front: nothing allocates at 1 kHz), so a
+    // long run must fit: --duration-s 1e6 ran out of memory, 1e5 took 3.2 GB before a server was
+    // found (a helper session). Samples of the loadtest and the phantom, per tick and client.
+    const double ticks = static_cast<double>(base.ticks + base.drain_ticks + 16);
+    const double bytes = static_cast<double>(o.clients) * ticks *
+                         static_cast<double>(loadtest::ClientRecorder::kBytesPerTick + 3 * sizeof(double));
+    const std::optional<std::size_t> available = AvailableMemoryBytes();
+    if (available && bytes > 0.5 * static_cast<double>(*available)) {
+      char message[320];
+      std::snprintf(message, sizeof(message),
+                    "--duration-s %g with %d clients keeps %.1f GiB of per-tick samples, more than half of the "
+                    "%.1f GiB this machine has available: run shorter or with fewer clients",
+                    o.duration_s, o.clients, bytes / (1 << 30), static_cast<double>(*available) / (1 << 30));
+      throw InputError(message);
+    }
+  }
 
   if (!o.csv_dir.empty()) std::filesystem::create_directories(o.csv_dir);
   std::signal(SIGINT, OnStopSignal);
