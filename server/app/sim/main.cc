@@ -124,6 +124,10 @@ bool Parse(int argc, char** argv, Options* options) {
                   hapco::sim::kMaxFrictionCoefficient, options->friction);
     throw hapco::InputError(message);
   }
+  if (!options->client_id.empty() && options->trajectory_path.empty()) {
+    // (It was accepted and ignored: the scene's phases ran. A helper session.)
+    throw hapco::InputError("--client-id picks rows of a --trajectory file; give the file too");
+  }
   return true;
 }
 
