@@ -83,7 +83,8 @@ bool Parse(int argc, char** argv, Options* options) {
   command.AddText("--trajectory", &options->trajectory_path, "FILE",
                   "step k moves the tool to row k of FILE instead of the scene's phases: a CSV with columns "
                   "x_m,y_m,z_m (hapco-server --trace) or dx_m,dy_m,dz_m (hapco-sim --csv, hapco-report --csv), "
-                  "found by header name",
+                  "found by header name; `scene` (the default) runs the scene's phases, as hapco-phantom's "
+                  "and hapco-loadtest's --trajectory scene",
                   "Run");
   command.AddText("--client-id", &options->client_id, "ID",
                   "with --trajectory: the rows of that client_id (files of several clients)", "Run");
@@ -124,6 +125,8 @@ bool Parse(int argc, char** argv, Options* options) {
                   hapco::sim::kMaxFrictionCoefficient, options->friction);
     throw hapco::InputError(message);
   }
+  // The same word as hapco-phantom and hapco-loadtest (it was "cannot read trajectory scene").
+  if (options->trajectory_path == "scene") options->trajectory_path.clear();
   if (!options->client_id.empty() && options->trajectory_path.empty()) {
     // (It was accepted and ignored: the scene's phases ran. A helper session.)
     throw hapco::InputError("--client-id picks rows of a --trajectory file; give the file too");
