@@ -39,15 +39,7 @@ sim::PoseVerdict CheckStatelessPose(const hapco_idl_DevicePose& pose, const sim:
 
 sim::PoseVerdict PoseStream::Check(const hapco_idl_DevicePose& pose, std::int64_t receive_ns,
                                    const sim::PoseLimits& limits, const hapco_idl_DevicePose* pending) {
-  if (flood_tokens_ < 0) {
-    flood_tokens_ = limits.flood_burst;
-  } else {
-    const double elapsed_ms = static_cast<double>(receive_ns - flood_last_ns_) * 1e-6;
-    flood_tokens_ = std::min(limits.flood_burst, flood_tokens_ + elapsed_ms * limits.max_poses_per_ms);
-  }
-  flood_last_ns_ = receive_ns;
-  if (flood_tokens_ < 1.0) return sim::PoseVerdict::kFlood;
-  flood_tokens_ -= 1.0;
+  if (!flood_.Take(receive_ns, limits.flood_burst, limits.max_poses_per_ms)) return sim::PoseVerdict::kFlood;
   if (!FiniteOrientation(pose)) return sim::PoseVerdict::kNonFinite;
   if (pending != nullptr) {
     return sim::CheckPose(PositionOf(pose), pose.sequence_number,

@@ -11,6 +11,7 @@
 
 #include <Eigen/Core>
 
+#include "common/token_bucket.h"
 #include "hapco_types.h"
 #include "sim/pose_limits.h"
 
@@ -47,8 +48,7 @@ class PoseStream {
 
  private:
   std::optional<sim::AcceptedPose> last_;
-  double flood_tokens_ = -1;  // < 0: not started
-  std::int64_t flood_last_ns_ = 0;
+  TokenBucket flood_;  // every pose seen takes a token (sim::PoseLimits::flood_burst)
 };
 
 // The poses of one client waiting for the next step batch (ServerLoop::StepQueued), in

@@ -52,8 +52,7 @@ ServerLoop::ServerLoop(std::vector<const sim::TwoBodyModel*> models, dds_domaini
       recorder_probe_(recorder_probe_publisher_, contact_topic_),
       waitset_(participant_),
       pool_(options.threads),
-      log_tokens_(kLogKinds, -1.0),
-      last_log_ns_(kLogKinds, 0),
+      log_buckets_(kLogKinds),
       suppressed_logs_(kLogKinds, 0) {
   if (models_.empty()) throw InputError("the server needs at least one scene");
   for (std::size_t i = 0; i < models_.size(); ++i) {
@@ -667,15 +666,10 @@ void ServerLoop::Log(int kind, const std::string& message) {
   const int64_t now = MonotonicNowNs();
   // A token bucket per kind (kLogBurst, kSessionLogBurst; one line a second on average): a
   // flood of bad poses cannot flood the log. The number of suppressed lines is reported.
-  const double burst = kind == kLogSession ? kSessionLogBurst : kLogBurst;
-  double& tokens = log_tokens_[k];
-  tokens = tokens < 0 ? burst : std::min(burst, tokens + static_cast<double>(now - last_log_ns_[k]) * 1e-9);
-  last_log_ns_[k] = now;
-  if (tokens < 1.0) {
+  if (!log_buckets_[k].Take(now, kind == kLogSession ? kSessionLogBurst : kLogBurst, /*rate_per_ms=*/1e-3)) {
     ++suppressed_logs_[k];
     return;
   }
-  tokens -= 1.0;
   if (suppressed_logs_[k] > 0) {
     std::fprintf(stderr, "hapco-server: %s (+%llu similar suppressed)\n", message.c_str(),
                  static_cast<unsigned long long>(suppressed_logs_[k]));

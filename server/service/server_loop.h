@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "common/background_deleter.h"
+#include "common/token_bucket.h"
 #include "common/work_pool.h"
 #include "hapco_types.h"
 #include "service/dds.h"
@@ -208,8 +209,7 @@ class ServerLoop {
   std::array<hapco_idl_DevicePose, hapco_idl_RECENT_SAMPLES> missed_{};  // RecoverMissedPoses scratch
   int64_t start_ns_ = 0;
   int64_t last_status_ns_ = 0, last_status_cpu_ns_ = 0;  // for ServerStatus.cpu_use
-  std::vector<double> log_tokens_;  // per log kind, < 0 before its first line (Log)
-  std::vector<int64_t> last_log_ns_;
+  std::vector<TokenBucket> log_buckets_;  // per log kind (Log)
   std::vector<uint64_t> suppressed_logs_;
 };
 
