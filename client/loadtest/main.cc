@@ -611,9 +611,30 @@ int Run(const Options& o) {
   all.render_p50 = hapco::QuantileOf(all_render, 0.5);
   all.render_p99 = hapco::QuantileOf(all_render, 0.99);
 
-  std::printf("hapco-loadtest: %zu of %d clients ran %.1f s each (%s, render %s%s%s)%s\n", ran.size(), o.clients,
-              o.duration_s, o.mode.c_str(), phantom::RenderingName(o.rendering).c_str(), "",
-              o.loop ? ", trajectory looped" : "", g_stop.load() ? " - stopped by signal" : "");
+  if (g_stop.load()) {
+    // What each client really ran (a signal during the stagger left clients that never started,
+    // and the line said "2 of 2 clients ran 2.0 s each"; a helper session).
+    double shortest_s = HUGE_VAL, longest_s = 0.0;
+    int not_started = 0;
+    for (const ClientRun* r : ran) {
+      const double ran_s = static_cast<double>(r->recorder->progress_ticks.load()) * tick_s;
+      if (ran_s <= 0.0) {
+        ++not_started;
+        continue;
+      }
+      shortest_s = std::min(shortest_s, ran_s);
+      longest_s = std::max(longest_s, ran_s);
+    }
+    std::printf("hapco-loadtest: stopped by signal: %zu of %d clients ran %.1f-%.1f s of %.1f s, %d had not started "
+                "(%s, render %s%s)\n",
+                ran.size() - static_cast<std::size_t>(not_started), o.clients, not_started == static_cast<int>(ran.size()) ? 0.0 : shortest_s,
+                longest_s, o.duration_s, not_started + (o.clients - static_cast<int>(ran.size())), o.mode.c_str(),
+                phantom::RenderingName(o.rendering).c_str(), o.loop ? ", trajectory looped" : "");
+  } else {
+    std::printf("hapco-loadtest: %zu of %d clients ran %.1f s each (%s, render %s%s)\n", ran.size(), o.clients,
+                o.duration_s, o.mode.c_str(), phantom::RenderingName(o.rendering).c_str(),
+                o.loop ? ", trajectory looped" : "");
+  }
   if (o.rendering.mode == phantom::RenderMode::kLocalModel || o.rendering.passivity) {
     std::printf("rendering: %llu ticks from a local model; passivity controller dissipated %.4f J\n",
                 static_cast<unsigned long long>(all.model_ticks), all.dissipated_j);
