@@ -280,7 +280,17 @@ CLI::Validator OutputDirectoryCheck(const std::string& flag) {
 CLI::Option* CommandLine::AddOutputDirectory(const std::string& name, std::string* path, const std::string& metavar,
                                              const std::string& help, const std::string& group) {
   metavars_[name] = metavar;
-  return app_.add_option(name, *path, help)->check(OutputDirectoryCheck(name))->group(group);
+  // Without its trailing slashes: the tools append "/file" ("charts//steps.csv" was printed).
+  const CLI::Validator trailing_slashes(
+      [](std::string& text) -> std::string {
+        while (text.size() > 1 && text.back() == '/') text.pop_back();
+        return "";
+      },
+      "");
+  return app_.add_option(name, *path, help)
+      ->check(OutputDirectoryCheck(name))
+      ->transform(trailing_slashes)
+      ->group(group);
 }
 
 CLI::Option* CommandLine::AddOutputFile(const std::string& name, std::string* path, const std::string& metavar,

@@ -62,6 +62,17 @@ TEST(CommandLineTest, AcceptsGoodValues) {
   EXPECT_TRUE(options.quiet);
 }
 
+// An output folder is kept without trailing slashes (the tools append "/file": a helper saw
+// "charts//steps.csv").
+TEST(CommandLineTest, AnOutputFolderLosesItsTrailingSlashes) {
+  std::string dir;
+  CommandLine command("hapco-toy", "[options]", "A toy tool.", "Exit code: 0.");
+  command.AddOutputDirectory("--plots", &dir, "DIR", "charts here", "Output");
+  const std::string tmp = ::testing::TempDir();
+  ASSERT_TRUE(command.Parse(std::vector<std::string>{"--plots", tmp + "/charts//"}));
+  EXPECT_EQ(dir, tmp + "/charts");
+}
+
 TEST(CommandLineTest, BadInputNamesTheOptionAndTheRange) {
   EXPECT_EQ(ErrorOf({"s", "--steps", "banana"}), "--steps expects an integer in [1, 100], got 'banana'");
   EXPECT_EQ(ErrorOf({"s", "--steps", "101"}), "--steps expects an integer in [1, 100], got '101'");
