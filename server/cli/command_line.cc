@@ -411,6 +411,61 @@ void CommandLine::AddMultirate(int* physics_every, double* max_model_distance_m)
   multirate_physics_every_ = physics_every;
 }
 
+std::vector<std::string> NearMisses(const std::string& given, const std::vector<std::string>& known) {
+  const auto edit_distance = [](const std::string& a, const std::string& b) {
+    std::vector<size_t> row(b.size() + 1);
+    for (size_t j = 0; j <= b.size(); ++j) row[j] = j;
+    for (size_t i = 1; i <= a.size(); ++i) {
+      size_t diagonal = row[0];
+      row[0] = i;
+      for (size_t j = 1; j <= b.size(); ++j) {
+        const size_t substitution = diagonal + (a[i - 1] == b[j - 1] ? 0 : 1);
+        diagonal = row[j];
+        row[j] = std::min({row[j] + 1, row[j - 1] + 1, substitution});
+      }
+    }
+    return row[b.size()];
+  };
+  std::vector<std::string> beginning, closest;
+  size_t closest_distance = std::max<size_t>(1, given.size() / 4) + 1;
+  // "--" alone or "--x" begins too many options to say anything useful.
+  const bool long_enough = given.rfind("--", 0) == 0 && given.size() >= 5;
+  for (const std::string& name : known) {
+    if (name == given || name.rfind("--", 0) != 0) continue;
+    if (long_enough && name.rfind(given, 0) == 0) beginning.push_back(name);
+    const size_t distance = edit_distance(given, name);
+    if (distance < closest_distance) {
+      closest_distance = distance;
+      closest = {name};
+    } else if (distance == closest_distance) {
+      closest.push_back(name);
+    }
+  }
+  std::vector<std::string>& misses = beginning.empty() ? closest : beginning;
+  std::sort(misses.begin(), misses.end());
+  misses.erase(std::unique(misses.begin(), misses.end()), misses.end());
+  if (misses.size() > 3) misses.clear();  // too many to be a hint
+  return misses;
+}
+
+std::string CommandLine::UnknownOptionMessage(const std::string& argument) const {
+  const std::string given = argument.substr(0, argument.find('='));
+  std::vector<std::string> known;
+  for (const CLI::Option* option : app_.get_options()) {
+    for (const std::string& name : option->get_lnames()) known.push_back("--" + name);
+  }
+  for (const auto& [old_name, current] : deprecated_) {
+    if (!current.empty()) known.push_back(current);  // never suggest an old spelling
+  }
+  const std::vector<std::string> misses = NearMisses(given, known);
+  if (misses.empty()) return "unknown option " + given + " (see --help)";
+  std::string hint;
+  for (size_t k = 0; k < misses.size(); ++k) {
+    hint += (k == 0 ? "" : (k + 1 == misses.size() ? " or " : ", ")) + misses[k];
+  }
+  return "unknown option " + given + " (did you mean " + hint + "? see --help)";
+}
+
 void CommandLine::Deprecate(const std::string& old_name, const std::string& current_name) {
   deprecated_[old_name] = current_name;
 }
@@ -467,13 +522,13 @@ bool CommandLine::Parse(std::vector<std::string> arguments) {
   } catch (const CLI::ExtrasError&) {
     const std::vector<std::string> extra = app_.remaining();
     const std::string first = extra.empty() ? std::string("?") : extra.front();
-    if (!first.empty() && first[0] == '-') throw InputError("unknown option " + first + " (see --help)");
+    if (!first.empty() && first[0] == '-') throw InputError(UnknownOptionMessage(first));
     throw InputError("unexpected argument " + Quoted(first) + " (see --help)");
   } catch (const CLI::RequiredError& error) {
     // CLI11 checks requirements before extras: an unknown option is the better message
     // ("hapco-sim --bogus" is a typo, not a missing scene).
     for (const std::string& extra : app_.remaining()) {
-      if (!extra.empty() && extra[0] == '-') throw InputError("unknown option " + extra + " (see --help)");
+      if (!extra.empty() && extra[0] == '-') throw InputError(UnknownOptionMessage(extra));
     }
     const std::string what = error.what();
     for (const CLI::Option* option : app_.get_options()) {

@@ -124,6 +124,9 @@ class CommandLine {
   std::string BashCompletion() const;
 
  private:
+  // "unknown option --x (see --help)", with the options it is a near miss of, if any.
+  std::string UnknownOptionMessage(const std::string& argument) const;
+
   std::string tool_, synopsis_, description_, footer_;
   CLI::App app_;
   std::map<std::string, std::string> deprecated_;          // old spelling -> current ("" = drop)
@@ -131,6 +134,11 @@ class CommandLine {
   std::map<std::string, std::vector<std::string>> choices_;  // option name -> accepted values
   std::map<std::string, std::string> metavars_;              // option name -> FILE, DIR, N, ...
 };
+
+// The long options among `known` that `given` is a near miss of ("--duration" for
+// "--duration-s", "--ouput" for "--output"): the ones it begins, else the closest by edit
+// distance if within a quarter of its length (at least 1). Empty when none is near; at most 3.
+std::vector<std::string> NearMisses(const std::string& given, const std::vector<std::string>& known);
 
 // Word-wraps `text` to `width` columns, continuation lines indented by `indent` spaces;
 // explicit newlines in `text` are kept.

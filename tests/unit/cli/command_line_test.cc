@@ -93,6 +93,11 @@ TEST(CommandLineTest, BadInputNamesTheOptionAndTheRange) {
             "--solver expects local-uzawa | global-uzawa-gs | global-uzawa-jacobi | reference, got 'newton'");
   EXPECT_EQ(ErrorOf({"s", "--bogus"}), "unknown option --bogus (see --help)");
   EXPECT_EQ(ErrorOf({"s", "extra"}), "unexpected argument 'extra' (see --help)");
+  // A near miss names what was probably meant (a helper typed the scripts' --duration).
+  EXPECT_EQ(ErrorOf({"s", "--duration", "3"}), "unknown option --duration (did you mean --duration-s? see --help)");
+  EXPECT_EQ(ErrorOf({"s", "--dur=3"}), "unknown option --dur (did you mean --duration-s? see --help)");
+  EXPECT_EQ(ErrorOf({"s", "--ouput", "x"}), "unknown option --ouput (did you mean --output? see --help)");
+  EXPECT_EQ(ErrorOf({"--stepz", "3", "s"}), "unknown option --stepz (did you mean --steps? see --help)");
   EXPECT_EQ(ErrorOf({"--steps", "3"}), "missing SCENE argument (see --help)");
   EXPECT_EQ(ErrorOf({"s", "--steps"}), "--steps needs a value (see --help)");
 }
@@ -100,6 +105,19 @@ TEST(CommandLineTest, BadInputNamesTheOptionAndTheRange) {
 // Output paths are checked when the command line is read: hapco-sim --output DIR ran the whole
 // simulation, then failed to rename its partial file and left it behind; "" meant "no file"
 // in some tools and was refused in others.
+TEST(CommandLineTest, NearMissesAreBeginningsOrWithinAQuarterOfTheLength) {
+  const std::vector<std::string> known = {"--max-iter", "--max-jump-m", "--mu", "--output", "--quiet", "-o"};
+  EXPECT_EQ(NearMisses("--max", known), (std::vector<std::string>{"--max-iter", "--max-jump-m"}));
+  EXPECT_EQ(NearMisses("--max-jump", known), (std::vector<std::string>{"--max-jump-m"}));
+  EXPECT_EQ(NearMisses("--outptu", known), (std::vector<std::string>{"--output"}));  // 2 edits in 9
+  EXPECT_EQ(NearMisses("--qiet", known), (std::vector<std::string>{"--quiet"}));
+  // Too short to begin anything usefully, but one edit from --mu.
+  EXPECT_EQ(NearMisses("--m", known), (std::vector<std::string>{"--mu"}));
+  EXPECT_TRUE(NearMisses("--bogus", known).empty());
+  EXPECT_TRUE(NearMisses("--output", known).empty()) << "a known option is no miss";
+  EXPECT_TRUE(NearMisses("--", {"--a1", "--a2", "--a3", "--a4"}).empty());
+}
+
 TEST(CommandLineTest, OutputPathsAndEmptyValuesAreCheckedBeforeAnyWork) {
   const std::string dir = ::testing::TempDir();
   EXPECT_EQ(ErrorOf({"s", "-o", dir}), "--output: " + dir + " is a directory");
