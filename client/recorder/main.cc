@@ -68,6 +68,7 @@ struct Options {
   int domain = 0;
   double duration_s = 0;  // 0 = until a signal
   bool quiet = false;
+  bool overwrite = false;  // replace a file that already holds data
 };
 
 // Defines the command line (docs/cli.md) and parses it; false: --help/--version answered.
@@ -77,7 +78,11 @@ bool Parse(int argc, char** argv, Options* o) {
                    "scene file the server runs: its name and text go into the header (optional; without it the "
                    "header holds no scene)")
       ->required(false);
-  command.AddOutput(&o->output, "recording to write, created or truncated (required)");
+  command.AddOutput(&o->output,
+                    "recording to write (required); a file that already holds data is refused: what was "
+                    "recorded live cannot be recorded again")
+      ->required();
+  command.AddFlag("--overwrite", &o->overwrite, "replace an --output file that already holds data", "Output");
   command.AddDomain(&o->domain);
   command.AddSecurity(&o->security_dir, "DIR/recorder");
   command.AddOutputFile("--ready-file", &o->ready_file, "FILE",
@@ -384,7 +389,17 @@ int Run(const Options& o) {
 
   // The header goes first, before any DDS traffic: a recorder killed at any time leaves a
   // file with its header. An unwritable path throws InputError (exit 1).
-  hapco::io::RecordingWriter writer(o.output, MakeHeader(o));
+  hapco::io::RecordingWriter writer(
+      o.output, MakeHeader(o), o.overwrite ? hapco::io::ExistingFile::kReplace : hapco::io::ExistingFile::kRefuse);
+  // The ready file says "this recorder is ready now": one left by an earlier run would pass a
+  // health check before this one is (a helper session), so it goes at the start and at exit.
+  struct ReadyFileRemover {
+    const std::string& path;
+    ~ReadyFileRemover() {
+      if (!path.empty()) std::remove(path.c_str());
+    }
+  } ready_file_remover{o.ready_file};
+  if (!o.ready_file.empty()) std::remove(o.ready_file.c_str());
   Recorder recorder(&writer);
 
   using namespace hapco::service;
@@ -446,35 +461,45 @@ int Run(const Options& o) {
   };
   const int64_t start_ns = hapco::MonotonicNowNs();
   const int64_t end_ns = o.duration_s > 0 ? start_ns + static_cast<int64_t>(o.duration_s * 1e9) : INT64_MAX;
-  int64_t next_progress_ns = start_ns + 1'000'000'000;
-  while (!stop) {
-    const int64_t now = hapco::MonotonicNowNs();
-    if (now >= end_ns) break;
-    const int64_t wait_ns = std::min<int64_t>({end_ns - now, next_progress_ns - now, 200'000'000});
-    waitset.Wait(std::max<int64_t>(ready ? wait_ns : std::min<int64_t>(wait_ns, 20'000'000), 0));
-    drain();
-    check_ready();
-    if (hapco::MonotonicNowNs() >= next_progress_ns) {
-      next_progress_ns += 1'000'000'000;
-      if (!o.quiet) {
-        std::fprintf(stderr, "hapco-recorder: %llu records, %zu clients, %llu missing steps\n",
-                     static_cast<unsigned long long>(writer.records_written()), recorder.clients(),
-                     static_cast<unsigned long long>(recorder.missing_steps()));
+  // The summary is printed however the run ends: a write error (a full disk) ended it without
+  // one, so what had been recorded went unsaid (a helper session).
+  const auto print_summary = [&](const char* stopped_by) {
+    std::printf("hapco-recorder: %llu steps from %zu clients, %llu missing steps, %llu status records, "
+                "%llu forces seen, file %s (%llu steps from forces alone, %llu frames received again and "
+                "dropped; stopped by %s)\n",
+                static_cast<unsigned long long>(recorder.steps()), recorder.clients(),
+                static_cast<unsigned long long>(recorder.missing_steps()),
+                static_cast<unsigned long long>(recorder.status_records()),
+                static_cast<unsigned long long>(recorder.forces_seen()), o.output.c_str(),
+                static_cast<unsigned long long>(recorder.from_forces()),
+                static_cast<unsigned long long>(recorder.repeated_frames()),
+                stopped_by);
+  };
+  try {
+    int64_t next_progress_ns = start_ns + 1'000'000'000;
+    while (!stop) {
+      const int64_t now = hapco::MonotonicNowNs();
+      if (now >= end_ns) break;
+      const int64_t wait_ns = std::min<int64_t>({end_ns - now, next_progress_ns - now, 200'000'000});
+      waitset.Wait(std::max<int64_t>(ready ? wait_ns : std::min<int64_t>(wait_ns, 20'000'000), 0));
+      drain();
+      check_ready();
+      if (hapco::MonotonicNowNs() >= next_progress_ns) {
+        next_progress_ns += 1'000'000'000;
+        if (!o.quiet) {
+          std::fprintf(stderr, "hapco-recorder: %llu records, %zu clients, %llu missing steps\n",
+                       static_cast<unsigned long long>(writer.records_written()), recorder.clients(),
+                       static_cast<unsigned long long>(recorder.missing_steps()));
+        }
       }
     }
+    drain();  // what was received before the stop
+    recorder.FlushPending();
+  } catch (const hapco::InputError&) {
+    print_summary("a write error");
+    throw;
   }
-  drain();  // what was received before the stop
-  recorder.FlushPending();
-  std::printf("hapco-recorder: %llu steps from %zu clients, %llu missing steps, %llu status records, "
-              "%llu forces seen, file %s (%llu steps from forces alone, %llu frames received again and "
-              "dropped; stopped by %s)\n",
-              static_cast<unsigned long long>(recorder.steps()), recorder.clients(),
-              static_cast<unsigned long long>(recorder.missing_steps()),
-              static_cast<unsigned long long>(recorder.status_records()),
-              static_cast<unsigned long long>(recorder.forces_seen()), o.output.c_str(),
-              static_cast<unsigned long long>(recorder.from_forces()),
-              static_cast<unsigned long long>(recorder.repeated_frames()),
-              stop_signals.ReceivedName("--duration-s"));
+  print_summary(stop_signals.ReceivedName("--duration-s"));
   if (recorder.model_answers() > 0) {
     std::printf("hapco-recorder: %llu forces answered between steps (hapco-server --physics-every: no contact state of "
                 "their own), not recorded as steps\n",

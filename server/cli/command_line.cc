@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <memory>
 #include <sstream>
 
 #include "cli/run_main.h"
@@ -232,13 +233,17 @@ CLI::Option* CommandLine::AddQuiet(bool* quiet, const std::string& what) {
   return AddFlag("--quiet", quiet, what, kGroupGeneral);
 }
 
-CLI::Validator OutputFileCheck(const std::string& flag) {
+// `option` is filled in once the option exists: a required output has no "leave it out".
+CLI::Validator OutputFileCheck(const std::string& flag, std::shared_ptr<const CLI::Option*> option) {
   // Checked when the command line is read, not when the run ends: a directory or a folder that
   // does not exist was found only after the whole run (hapco-sim --output DIR: the run, then
   // "cannot move ...partial", the recording left under another name).
   return CLI::Validator(
-      [flag](std::string& text) -> std::string {
-        if (text.empty()) throw InputError(flag + " needs a file name (leave the option out for no file)");
+      [flag, option](std::string& text) -> std::string {
+        if (text.empty()) {
+          const bool required = *option != nullptr && (*option)->get_required();
+          throw InputError(flag + " needs a file name" + (required ? "" : " (leave the option out for no file)"));
+        }
         std::error_code error;
         const std::filesystem::path path(text);
         if (std::filesystem::is_directory(path, error)) throw InputError(flag + ": " + text + " is a directory");
@@ -296,12 +301,66 @@ CLI::Option* CommandLine::AddOutputDirectory(const std::string& name, std::strin
 CLI::Option* CommandLine::AddOutputFile(const std::string& name, std::string* path, const std::string& metavar,
                                         const std::string& help, const std::string& group) {
   metavars_[name] = metavar;
-  return app_.add_option(name, *path, help)->check(OutputFileCheck(name))->group(group);
+  return AddOutputFileOption(name, name, path, help, group);
+}
+
+CLI::Option* CommandLine::AddOutputFileOption(const std::string& names, const std::string& flag, std::string* path,
+                                              const std::string& help, const std::string& group) {
+  auto option_ref = std::make_shared<const CLI::Option*>(nullptr);
+  CLI::Option* option = app_.add_option(names, *path, help)->check(OutputFileCheck(flag, option_ref))->group(group);
+  *option_ref = option;
+  output_files_.insert(option);
+  return option;
+}
+
+void CommandLine::CheckOutputsAreNotInputs() const {
+  // An output that is also an input, or another output, destroys what it overwrites before it
+  // is read or written: hapco-recorder s.txtpb --output s.txtpb wrote a recording over the
+  // scene the server ran, hapco-sim --trajectory t.csv --csv t.csv over its trajectory (a
+  // helper session).
+  struct Given {
+    const CLI::Option* option;
+    std::filesystem::path path;
+  };
+  std::vector<Given> given;
+  for (const CLI::Option* option : app_.get_options()) {
+    if (option->count() == 0 || option->results().empty() || option->results().back().empty()) continue;
+    given.push_back({option, std::filesystem::path(option->results().back())});
+  }
+  const auto same_file = [](const std::filesystem::path& a, const std::filesystem::path& b) {
+    std::error_code error;
+    if (std::filesystem::exists(a, error) && std::filesystem::exists(b, error)) {
+      return std::filesystem::equivalent(a, b, error) && !error;
+    }
+    return std::filesystem::weakly_canonical(a, error) == std::filesystem::weakly_canonical(b, error) && !error;
+  };
+  const auto display = [](const CLI::Option* option) {
+    return option->get_positional() ? option->get_name(true) : option->get_name();
+  };
+  for (const Given& output : given) {
+    if (output_files_.count(output.option) == 0) continue;
+    std::error_code error;
+    if (!std::filesystem::is_regular_file(output.path, error) && std::filesystem::exists(output.path, error)) {
+      continue;  // /dev/null and the like may be given twice
+    }
+    for (const Given& other : given) {
+      if (other.option == output.option) continue;
+      const bool other_is_output = output_files_.count(other.option) > 0;
+      // An input counts when it names an existing file; two outputs clash even before they exist.
+      if (!other_is_output && !std::filesystem::is_regular_file(other.path, error)) continue;
+      if (!same_file(output.path, other.path)) continue;
+      if (other_is_output && other.option < output.option) continue;  // say it once per pair
+      throw InputError(display(output.option) + " " + output.path.string() + " is also " +
+                       (other_is_output ? "the file of " : "the input ") + display(other.option) +
+                       ": writing it would destroy " + (other_is_output ? "the other output" : "the input") +
+                       "; give another file");
+    }
+  }
 }
 
 CLI::Option* CommandLine::AddOutput(std::string* path, const std::string& help) {
   metavars_["--output"] = "FILE";
-  return app_.add_option("-o,--output", *path, help)->check(OutputFileCheck("--output"))->group(kGroupOutput);
+  return AddOutputFileOption("-o,--output", "--output", path, help, kGroupOutput);
 }
 
 CLI::Option* CommandLine::AddCsv(std::string* path, const std::string& help) {
@@ -546,6 +605,7 @@ bool CommandLine::Parse(std::vector<std::string> arguments) {
   } catch (const CLI::ParseError& error) {
     throw InputError(std::string(error.what()) + " (see --help)");
   }
+  CheckOutputsAreNotInputs();
   if (multirate_physics_every_ != nullptr && *multirate_physics_every_ == 1 && app_.count("--model-distance-m") > 0) {
     std::fprintf(stderr, "%s: note: --model-distance-m has no effect without --physics-every K > 1 (every pose is stepped)\n",
                  tool_.c_str());

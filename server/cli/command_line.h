@@ -16,6 +16,7 @@
 #include <CLI/CLI.hpp>
 
 #include <map>
+#include <set>
 #include <string>
 #include <utility>
 #include <vector>
@@ -124,6 +125,11 @@ class CommandLine {
   std::string BashCompletion() const;
 
  private:
+  // An output file option: checked when read, and against the other files given.
+  CLI::Option* AddOutputFileOption(const std::string& names, const std::string& flag, std::string* path,
+                                   const std::string& help, const std::string& group);
+  // Throws InputError when an output file is also an input file or another output.
+  void CheckOutputsAreNotInputs() const;
   // "unknown option --x (see --help)", with the options it is a near miss of, if any.
   std::string UnknownOptionMessage(const std::string& argument) const;
 
@@ -133,6 +139,7 @@ class CommandLine {
   const int* multirate_physics_every_ = nullptr;            // AddMultirate's K, for Parse's note
   std::map<std::string, std::vector<std::string>> choices_;  // option name -> accepted values
   std::map<std::string, std::string> metavars_;              // option name -> FILE, DIR, N, ...
+  std::set<const CLI::Option*> output_files_;                // options that name a file to write
 };
 
 // The long options among `known` that `given` is a near miss of ("--duration" for

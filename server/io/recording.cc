@@ -1,6 +1,12 @@
 #include "io/recording.h"
 
+#include <fcntl.h>
+#include <sys/file.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
 #include <array>
+#include <cerrno>
 #include <cstring>
 
 #include "common/error.h"
@@ -43,9 +49,36 @@ std::uint32_t Crc32(const void* data, std::size_t size) {
   return crc ^ 0xFFFFFFFFu;
 }
 
-RecordingWriter::RecordingWriter(const std::string& path, const recording::Header& header) : path_(path) {
-  file_ = std::fopen(path.c_str(), "wb");
-  if (file_ == nullptr) throw InputError("cannot create recording file " + path);
+RecordingWriter::RecordingWriter(const std::string& path, const recording::Header& header, ExistingFile existing)
+    : path_(path) {
+  // Opened without O_TRUNC: whether the data may go is decided after the lock is held (two
+  // recorders on one --output interleaved their records and both reported success; a
+  // restarted recorder truncated the steps its predecessor had recorded: a helper session).
+  const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_CLOEXEC, 0644);
+  if (fd < 0) throw InputError("cannot create recording file " + path + ": " + std::strerror(errno));
+  if (::flock(fd, LOCK_EX | LOCK_NB) != 0) {
+    ::close(fd);
+    throw InputError("another process is writing " + path +
+                     " (a second recorder on the same --output?): give each writer a file of its own");
+  }
+  struct stat status {};
+  if (::fstat(fd, &status) == 0 && S_ISREG(status.st_mode) && status.st_size > 0) {
+    if (existing == ExistingFile::kRefuse) {
+      ::close(fd);
+      throw InputError(path + " already holds " + std::to_string(status.st_size) +
+                       " bytes (an earlier recording, or another file): give another --output (docker/compose.yaml "
+                       "names recordings by their start time), or --overwrite to replace it");
+    }
+    if (::ftruncate(fd, 0) != 0) {
+      ::close(fd);
+      throw InputError("cannot truncate recording file " + path + ": " + std::strerror(errno));
+    }
+  }
+  file_ = ::fdopen(fd, "wb");  // the lock lives as long as the descriptor, released by fclose
+  if (file_ == nullptr) {
+    ::close(fd);
+    throw InputError("cannot create recording file " + path);
+  }
   if (std::fwrite(kFileMagic, 1, sizeof(kFileMagic), file_) != sizeof(kFileMagic)) {
     throw InputError("cannot write recording file " + path);
   }

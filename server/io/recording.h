@@ -17,11 +17,20 @@ namespace hapco::io {
 // CRC-32 (IEEE 802.3, reflected, polynomial 0xEDB88320) of `size` bytes.
 std::uint32_t Crc32(const void* data, std::size_t size);
 
+// What a writer does with a file that already holds data.
+enum class ExistingFile {
+  kReplace,  // truncate it (hapco-sim: a run can be repeated)
+  kRefuse,   // throw InputError (hapco-recorder: a live recording cannot be made again)
+};
+
 class RecordingWriter {
  public:
-  // Creates (truncates) the file and writes the file magic and the header record.
-  // Throws InputError if the file cannot be created.
-  RecordingWriter(const std::string& path, const recording::Header& header);
+  // Creates the file (truncating it, or refusing it if it holds data, per `existing`) and
+  // writes the file magic and the header record. The file is locked (flock) while the writer
+  // lives: a second writer on the same file is refused instead of interleaving its records.
+  // Throws InputError if the file cannot be created, is locked or is refused.
+  RecordingWriter(const std::string& path, const recording::Header& header,
+                  ExistingFile existing = ExistingFile::kReplace);
   ~RecordingWriter();
   RecordingWriter(const RecordingWriter&) = delete;
   RecordingWriter& operator=(const RecordingWriter&) = delete;

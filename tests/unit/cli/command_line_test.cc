@@ -105,6 +105,51 @@ TEST(CommandLineTest, BadInputNamesTheOptionAndTheRange) {
 // Output paths are checked when the command line is read: hapco-sim --output DIR ran the whole
 // simulation, then failed to rename its partial file and left it behind; "" meant "no file"
 // in some tools and was refused in others.
+// hapco-recorder s.txtpb --output s.txtpb wrote its recording over the scene the server ran;
+// hapco-sim --trajectory t.csv --csv t.csv over the trajectory it was reading (a helper session).
+TEST(CommandLineTest, AnOutputThatIsAlsoAnInputOrAnotherOutputIsRefused) {
+  const std::string dir = ::testing::TempDir();
+  const std::string scene = dir + "/hapco_cli_scene.txtpb";
+  std::FILE* file = std::fopen(scene.c_str(), "w");
+  ASSERT_NE(file, nullptr);
+  std::fclose(file);
+  EXPECT_EQ(ErrorOf({scene, "-o", scene}),
+            "--output " + scene + " is also the input SCENE: writing it would destroy the input; give another file");
+  // The same file by another path.
+  EXPECT_EQ(ErrorOf({scene, "-o", dir + "/./hapco_cli_scene.txtpb"}),
+            "--output " + dir + "/./hapco_cli_scene.txtpb is also the input SCENE: writing it would destroy the "
+            "input; give another file");
+  // Two outputs on one file clash before either exists.
+  ToyOptions options;
+  std::string csv;
+  TOY_COMMAND(command);
+  DefineToy(command, &options);
+  command.AddCsv(&csv, "a table");
+  const std::string out = dir + "/hapco_cli_not_yet.rec";
+  try {
+    (void)command.Parse({scene, "-o", out, "--csv", out});
+    ADD_FAILURE() << "two outputs on one file were accepted";
+  } catch (const InputError& error) {
+    EXPECT_NE(std::string(error.what()).find("is also the file of"), std::string::npos) << error.what();
+  }
+  EXPECT_EQ(ErrorOf({scene, "-o", dir + "/hapco_cli_other.rec"}), "");
+  EXPECT_EQ(ErrorOf({scene, "-o", "/dev/null"}), "") << "a device is no input to destroy";
+  std::remove(scene.c_str());
+}
+
+// A required output has no "leave the option out" (hapco-recorder --output "" said so).
+TEST(CommandLineTest, ARequiredOutputNeedsAFileName) {
+  std::string output;
+  CommandLine command("hapco-toy", "[options]", "A toy tool.", "Exit code: 0.");
+  command.AddOutput(&output, "the recording")->required();
+  try {
+    (void)command.Parse(std::vector<std::string>{"--output", ""});
+    ADD_FAILURE() << "an empty required output was accepted";
+  } catch (const InputError& error) {
+    EXPECT_EQ(std::string(error.what()), "--output needs a file name");
+  }
+}
+
 TEST(CommandLineTest, NearMissesAreBeginningsOrWithinAQuarterOfTheLength) {
   const std::vector<std::string> known = {"--max-iter", "--max-jump-m", "--mu", "--output", "--quiet", "-o"};
   EXPECT_EQ(NearMisses("--max", known), (std::vector<std::string>{"--max-iter", "--max-jump-m"}));

@@ -156,6 +156,43 @@ TEST(RecordingTest, NotARecordingIsAClearError) {
   EXPECT_THROW(ReadRecording(TempPath("missing.hapcorec"), nullptr), InputError);
 }
 
+std::string ErrorOfWriter(const std::string& path, ExistingFile existing) {
+  try {
+    RecordingWriter writer(path, MakeHeader(), existing);
+  } catch (const InputError& error) {
+    return error.what();
+  }
+  return "";
+}
+
+// Two recorders on one --output interleaved their records and both reported success; a
+// restarted recorder truncated its predecessor's steps (a helper session). A second writer on
+// a file is refused while the first lives, and a live recorder never truncates data.
+TEST(RecordingTest, ASecondWriterAndExistingDataAreRefused) {
+  const std::string path = TempPath("locked.hapcorec");
+  std::filesystem::remove(path);
+  {
+    RecordingWriter first(path, MakeHeader(), ExistingFile::kRefuse);  // a new file is fine
+    first.AppendStep(MakeStep(1));
+    const std::string second = ErrorOfWriter(path, ExistingFile::kReplace);
+    EXPECT_NE(second.find("another process is writing " + path), std::string::npos) << second;
+    first.AppendStep(MakeStep(2));
+  }
+  const std::string recorded = ReadBytes(path);
+  const std::string refused = ErrorOfWriter(path, ExistingFile::kRefuse);
+  EXPECT_NE(refused.find(path + " already holds " + std::to_string(recorded.size()) + " bytes"), std::string::npos)
+      << refused;
+  EXPECT_NE(refused.find("--overwrite"), std::string::npos) << refused;
+  EXPECT_EQ(ReadBytes(path), recorded) << "a refused file is left as it was";
+  // Replacing (hapco-sim, hapco-recorder --overwrite) truncates: the header alone is left.
+  EXPECT_EQ(ErrorOfWriter(path, ExistingFile::kReplace), "");
+  EXPECT_EQ(ReadRecording(path, nullptr).size(), 1u);
+  // An empty file (made by mktemp, say) is no recording to keep.
+  WriteBytes(path, "");
+  EXPECT_EQ(ErrorOfWriter(path, ExistingFile::kRefuse), "");
+  std::filesystem::remove(path);
+}
+
 // A writer process killed with SIGKILL while writing: every record it completed reads back,
 // in order, with no gap.
 TEST(RecordingTest, WriterKilledWithSigkillLeavesAReadableFile) {
