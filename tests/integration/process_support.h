@@ -115,6 +115,9 @@ inline Eigen::Vector3d Vec(const std::map<std::string, std::string>& row, const 
 inline std::string TestDir() {
   const ::testing::TestInfo* info = ::testing::UnitTest::GetInstance()->current_test_info();
   const std::string dir = std::string(HAPCO_BINARY_DIR) + "/test-output/" + info->test_suite_name() + "." + info->name();
+  // Emptied first: a recorder refuses an --output that already holds data, and a test must not
+  // read an earlier run's files as its own.
+  std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir);
   return dir;
 }
