@@ -69,6 +69,19 @@ GH[3, 3] = 1.0; GH[4, 4] = 0.8; GH[2, 5] = -0.6; GH[4, 3] = 0.25  # contact 1 on
 GF = np.array([-1.0, 0.5, -0.5, -2.0, 0.25])
 GW = np.array([0.1, 0.0, 0.0, -0.05, 0.0, 0.0])
 GMU = np.array([0.4, 0.7])
+
+# A square H (n = 3 n_c): one particle of mass 2 (M = 2 I) on one contact whose frame is tilted
+# 0.3 rad about x, H = [n t1 t2] (not symmetric). Its triplets fit both readings, which give H
+# and its transpose: the file alone does not say which is meant (a helper session).
+SQ_ANGLE = 0.3
+SQ_M = 2.0 * np.eye(3)
+SQ_H = np.array([[0.0, 1.0, 0.0],
+                 [np.sin(SQ_ANGLE), 0.0, np.cos(SQ_ANGLE)],
+                 [np.cos(SQ_ANGLE), 0.0, -np.sin(SQ_ANGLE)]])
+SQ_F = np.array([0.5, 0.0, -19.62])
+SQ_W = np.zeros(3)
+SQ_MU = np.array([0.3])
+SQUARE = (SQ_M, SQ_H, SQ_F, SQ_W, SQ_MU, "HapCo square-H global test problem")
 assert np.array_equal(GM, GM.T) and np.all(np.linalg.eigvalsh(GM) > 0)
 
 
@@ -177,8 +190,10 @@ def triplets_of(a):
     return [(int(r), int(c), float(a[r, c])) for r, c in zip(rows, cols)]
 
 
-def global_file(path, layout, with_g=False):
-    """layout: 'siconos' (triplet rows in i), 'documented' (triplet rows in p) or 'csc'."""
+def global_file(path, layout, with_g=False, problem=None):
+    """layout: 'siconos' (triplet rows in i), 'documented' (triplet rows in p) or 'csc';
+    problem: (M, H, f, w, mu, title), default the 5-dof 2-contact one."""
+    gm, gh, gf, gw, gmu, title = problem or (GM, GH, GF, GW, GMU, "HapCo 5-dof 2-contact global test problem")
     def matrix(group, a):
         m, n = a.shape
         if layout == "csc":
@@ -194,17 +209,17 @@ def global_file(path, layout, with_g=False):
     with h5py.File(path, "w") as f:
         top = f.create_group("fclib_global")
         int1(top, "spacedim", 3)
-        matrix(top.create_group("M"), GM)
-        matrix(top.create_group("H"), GH)
+        matrix(top.create_group("M"), gm)
+        matrix(top.create_group("H"), gh)
         vec = top.create_group("vectors")
-        doubles(vec, "f", GF)
-        doubles(vec, "w", GW)
-        doubles(vec, "mu", GMU)
+        doubles(vec, "f", gf)
+        doubles(vec, "w", gw)
+        doubles(vec, "mu", gmu)
         if with_g:
             matrix(top.create_group("G"), np.array([[1.0], [0.0], [0.0], [0.0], [-1.0]]))
             doubles(vec, "b", [0.0])
         g = top.create_group("info")
-        fixed_string(g, "title", "HapCo 5-dof 2-contact global test problem (%s layout)" % layout)
+        fixed_string(g, "title", "%s (%s layout)" % (title, layout))
 
 
 def roundoff_csr(g):
@@ -239,6 +254,8 @@ def main():
     global_file(path("documented_global_triplet.hdf5"), "documented")
     global_file(path("csc_global.hdf5"), "csc")
     global_file(path("bad_global_with_g.hdf5"), "siconos", with_g=True)
+    global_file(path("square_global_siconos.hdf5"), "siconos", problem=SQUARE)
+    global_file(path("square_global_documented.hdf5"), "documented", problem=SQUARE)
 
     # One broken rule per file.
     local_file(path("bad_upper_triangle_triplet.hdf5"), upper_triangle_triplet)

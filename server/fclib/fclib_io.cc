@@ -977,6 +977,7 @@ contact::GlobalContactProblem ReadGlobalProblemInProcess(const std::string& path
                "libfclib read a different layout than the one checked");
   contact::GlobalContactProblem problem;
   TripletReading h_reading = TripletReading::kNotTriplet;
+  Eigen::SparseMatrix<double> h_other_reading;
   try {
     // M is symmetric: the two triplet readings give the same matrix (see fclib_io.h).
     problem.m = detail::ToSparse(*global->M, detail::TripletRows::kInI, layout.m.x_points, "M");
@@ -988,6 +989,13 @@ contact::GlobalContactProblem ReadGlobalProblemInProcess(const std::string& path
       try {
         problem.h = detail::ToSparse(*global->H, detail::TripletRows::kInI, layout.h.x_points, "H");
         h_reading = TripletReading::kRowsInI;
+        try {
+          Eigen::SparseMatrix<double> documented =
+              detail::ToSparse(*global->H, detail::TripletRows::kInP, layout.h.x_points, "H");
+          if ((documented - problem.h).norm() > 0.0) h_other_reading = std::move(documented);
+        } catch (const InputError&) {
+          // The documented reading does not fit: the file is unambiguous.
+        }
       } catch (const InputError& csparse_error) {
         try {
           problem.h = detail::ToSparse(*global->H, detail::TripletRows::kInP, layout.h.x_points, "H");
@@ -1012,6 +1020,7 @@ contact::GlobalContactProblem ReadGlobalProblemInProcess(const std::string& path
     details->m_storage = StorageOf(*global->M);
     details->h_storage = StorageOf(*global->H);
     details->h_triplet_reading = h_reading;
+    details->h_other_reading = std::move(h_other_reading);
     details->m_stored_entries = StoredEntries(*global->M);
     details->h_stored_entries = StoredEntries(*global->H);
     details->m_relative_asymmetry = contact::SparseRelativeAsymmetry(problem.m);
@@ -1371,6 +1380,7 @@ void Put(WireWriter& out, const FclibGlobalDetails& details) {
   out.Value(details.m_storage);
   out.Value(details.h_storage);
   out.Value(details.h_triplet_reading);
+  Put(out, details.h_other_reading);
   out.Value(details.m_stored_entries);
   out.Value(details.h_stored_entries);
   out.Value(details.m_relative_asymmetry);
@@ -1380,6 +1390,7 @@ void Get(WireReader& in, FclibGlobalDetails* details) {
   details->m_storage = in.Value<MatrixStorage>();
   details->h_storage = in.Value<MatrixStorage>();
   details->h_triplet_reading = in.Value<TripletReading>();
+  Get(in, &details->h_other_reading);
   details->m_stored_entries = in.Value<int>();
   details->h_stored_entries = in.Value<int>();
   details->m_relative_asymmetry = in.Value<double>();

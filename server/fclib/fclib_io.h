@@ -121,8 +121,12 @@ enum class FclibKind { kLocal, kGlobal };
 FclibKind ReadFclibKind(const std::string& path);
 
 // How a triplet-stored H was read: its row indices in `i` (CSparse, as Siconos writes) or in
-// `p` (as fclib.h documents). H is n × 3n_c, rarely square: the reading whose indices fit is
-// taken, CSparse's when both fit (M is symmetric: both readings agree).
+// `p` (as fclib.h documents). The reading whose indices fit is taken, CSparse's when both fit
+// (M is symmetric: both readings agree). Both fit whenever H is square (n = 3n_c: a particle
+// per contact) or its indices are small; if the two readings then differ, the file does not
+// say which is meant: FclibGlobalDetails::h_other_reading holds the other one (a helper's
+// square H written to fclib.h's comment was read transposed and solved to a wrong answer
+// without a word).
 enum class TripletReading { kNotTriplet, kRowsInI, kRowsInP };
 
 struct FclibGlobalDetails {
@@ -130,6 +134,9 @@ struct FclibGlobalDetails {
   MatrixStorage m_storage = MatrixStorage::kCompressedColumns;
   MatrixStorage h_storage = MatrixStorage::kCompressedColumns;
   TripletReading h_triplet_reading = TripletReading::kNotTriplet;
+  // Non-empty when the other triplet reading of H also fits and gives another matrix: H as
+  // that reading gives it (rows in `p` when h_triplet_reading is kRowsInI).
+  Eigen::SparseMatrix<double> h_other_reading;
   int m_stored_entries = 0, h_stored_entries = 0;
   double m_relative_asymmetry = 0.0;  // max|M − Mᵀ| / max|M| as stored
 };

@@ -47,6 +47,7 @@ struct Options {
   double local_tolerance = 1e-8;
   int max_iterations = 1000;
   int anderson_depth = 0;
+  std::string triplet_rows = "auto";  // a triplet H's row indices: auto, i or p
 };
 
 // Defines the command line (docs/cli.md) and parses it; false: --help/--version answered.
@@ -74,6 +75,12 @@ bool Parse(int argc, char** argv, Options* options) {
   command.AddMaxIterations(&options->max_iterations, "1000");
   command.AddAndersonDepth(&options->anderson_depth, "0; the shipped scenes use 5",
                            hapco::contact::SolverParameters::kMaxAndersonDepth);
+  command.AddChoice("--triplet-rows", &options->triplet_rows, {"auto", "i", "p"},
+                    "where a global problem's triplet-stored H keeps its row indices: i (CSparse, as Siconos "
+                    "writes), p (as fclib.h's comment documents), or auto: the reading whose indices fit, i "
+                    "when both do (default auto; when both fit and give different matrices, e.g. a square H, "
+                    "a warning says so)",
+                    "Solver");
   command.AddOutput(&options->out_path,
                     "write a copy of the problem (matrices in compressed columns) with the solution in its FCLIB "
                     "/solution group: r, u (and v for a global problem); also when not converged");
@@ -251,9 +258,39 @@ const char* ReadingName(fclib::TripletReading reading) {
   return "";
 }
 
+// Applies --triplet-rows to a triplet-stored H that both readings fit (fclib_io.h).
+void ChooseTripletReading(const Options& options, fclib::FclibGlobalDetails* details,
+                          contact::GlobalContactProblem* global) {
+  using fclib::TripletReading;
+  if (details->h_triplet_reading == TripletReading::kNotTriplet || options.triplet_rows == "auto") {
+    if (details->h_other_reading.size() > 0) {
+      std::fprintf(stderr,
+                   "hapco-solve: warning: H's triplet indices fit both with rows in i (CSparse, as Siconos writes) "
+                   "and with rows in p (as fclib.h documents), and the two give different matrices: read with "
+                   "rows in i. If the file was written to fclib.h's comment, give --triplet-rows p.\n");
+    }
+    return;
+  }
+  const TripletReading wanted = options.triplet_rows == "i" ? TripletReading::kRowsInI : TripletReading::kRowsInP;
+  if (details->h_triplet_reading == wanted) {
+    details->h_other_reading = {};
+    return;
+  }
+  if (details->h_other_reading.size() == 0) {
+    throw hapco::InputError("--triplet-rows " + options.triplet_rows + ": H's triplet indices do not fit that " +
+                            "reading (they fit only with rows in " +
+                            (wanted == TripletReading::kRowsInI ? "p" : "i") + ")");
+  }
+  global->h = std::move(details->h_other_reading);
+  details->h_other_reading = {};
+  details->h_triplet_reading = wanted;
+  contact::ValidateGlobalProblem(*global);
+}
+
 int RunGlobal(const Options& options) {
   fclib::FclibGlobalDetails details;
-  const contact::GlobalContactProblem global = fclib::ReadFclibGlobalProblem(options.problem_path, &details);
+  contact::GlobalContactProblem global = fclib::ReadFclibGlobalProblem(options.problem_path, &details);
+  ChooseTripletReading(options, &details, &global);
   const std::optional<fclib::FclibGlobalSolution> stored_solution =
       fclib::ReadFclibGlobalSolution(options.problem_path);
   const int n = global.num_dofs(), m = global.num_contacts();
@@ -262,8 +299,10 @@ int RunGlobal(const Options& options) {
   std::printf("problem       global (M v = H r + f, u = H^T v + w): %d dofs, %d contacts\n", n, m);
   std::printf("M             %d x %d, %s, %d stored entries, max|M - M^T| / max|M| = %.2e\n", n, n,
               fclib::StorageName(details.m_storage), details.m_stored_entries, details.m_relative_asymmetry);
-  std::printf("H             %d x %d, %s%s, %d stored entries\n", n, 3 * m, fclib::StorageName(details.h_storage),
-              ReadingName(details.h_triplet_reading), details.h_stored_entries);
+  std::printf("H             %d x %d, %s%s%s, %d stored entries\n", n, 3 * m, fclib::StorageName(details.h_storage),
+              ReadingName(details.h_triplet_reading),
+              details.h_other_reading.size() > 0 ? " (ambiguous: see the warning; --triplet-rows)" : "",
+              details.h_stored_entries);
   std::printf("contacts      %d, mu in [%g, %g]\n", m, global.mu.minCoeff(), global.mu.maxCoeff());
   if (stored_solution) {
     const contact::GlobalResidual residual =

@@ -103,6 +103,48 @@ TEST(FclibGlobal, EveryWritersLayoutReadsAsTheTypedProblem) {
   EXPECT_EQ(ReadFclibKind(DataFile("siconos_triplet.hdf5")), FclibKind::kLocal);
 }
 
+// A square H (one particle, one contact, tilted frame: H = [n t1 t2]) fits both triplet
+// readings, which give H and its transpose. The reader takes rows in i and hands over the other
+// reading; solved with the right one, the particle pressed down with f = (0.5, 0, -19.62) N and
+// W = H^T M^-1 H = I / 2 slides: r_n = -2 n.f / 2 = 18.74, r_t = -mu r_n q_t / |q_t| (by hand).
+// Read the other way, the same file gave "separating" with r = 0 (a helper session).
+TEST(FclibGlobal, ASquareHFitsBothTripletReadingsAndTheOtherIsHandedOver) {
+  const double angle = 0.3, mu = 0.3;
+  Eigen::Matrix3d h;
+  h << 0.0, 1.0, 0.0, std::sin(angle), 0.0, std::cos(angle), std::cos(angle), 0.0, -std::sin(angle);
+  for (const char* file : {"square_global_siconos.hdf5", "square_global_documented.hdf5"}) {
+    SCOPED_TRACE(file);
+    FclibGlobalDetails details;
+    contact::GlobalContactProblem read = ReadFclibGlobalProblem(DataFile(file), &details);
+    EXPECT_EQ(details.h_triplet_reading, TripletReading::kRowsInI);
+    ASSERT_EQ(details.h_other_reading.rows(), 3);
+    const bool documented = std::string(file).find("documented") != std::string::npos;
+    const Eigen::Matrix3d as_read = Eigen::MatrixXd(read.h), other = Eigen::MatrixXd(details.h_other_reading);
+    EXPECT_LT((as_read - (documented ? Eigen::Matrix3d(h.transpose()) : h)).norm(), 1e-15);
+    EXPECT_LT((other - (documented ? h : Eigen::Matrix3d(h.transpose()))).norm(), 1e-15);
+    if (documented) read.h = details.h_other_reading;  // hapco-solve --triplet-rows p
+    const delassus::GlobalToLocal reduction(read);
+    contact::SolverParameters params;
+    params.fc3d_tolerance = 1e-12;
+    params.global_tolerance_m = 1e-300;
+    contact::SolverWorkspace workspace;
+    contact::SolverResult result;
+    ASSERT_EQ(contact::Solve(contact::SolverKind::kReferenceNsgs, reduction.local(), params, &workspace, &result),
+              contact::SolverStatus::kConverged);
+    const Eigen::Vector3d f(0.5, 0.0, -19.62);
+    const Eigen::Vector3d q = h.transpose() * f / 2.0;  // W = I / 2, w = 0
+    const double normal = -q(0) / 0.5;
+    const Eigen::Vector2d tangential = -mu * normal * q.tail<2>().normalized();
+    EXPECT_NEAR(result.force_n(0), normal, 1e-9);
+    EXPECT_NEAR(result.force_n(1), tangential(0), 1e-9);
+    EXPECT_NEAR(result.force_n(2), tangential(1), 1e-9);
+  }
+  // An H whose triplets fit one reading only hands over nothing.
+  FclibGlobalDetails details;
+  (void)ReadFclibGlobalProblem(DataFile("siconos_global_triplet.hdf5"), &details);
+  EXPECT_EQ(details.h_other_reading.size(), 0);
+}
+
 TEST(FclibGlobal, EqualityConstraintsAndWrongKindAreRefusedWithWhatToDo) {
   EXPECT_NE(MessageOf([] { ReadFclibGlobalProblem(DataFile("bad_global_with_g.hdf5")); })
                 .find("has equality constraints (/fclib_global/G and b"),
