@@ -47,6 +47,7 @@ struct Options {
   std::string scene_path, mode = "kinematic", prefix = "lt", csv_dir, security_dir, render = "auto";
   std::string trajectory = "scene";
   int clients = 0, domain = 0, rt_priority = 0;
+  double max_answer_age_ms = 500;
   double duration_s = 0, stagger_ms = 100, timeout_ms = 50, connect_timeout_s = 30, max_model_stiffness_n_per_m = 3000;
   bool loop = false, plots = false, quiet = false;
   hapco::phantom::RendererParameters rendering;  // --render resolved (auto -> by --mode)
@@ -88,6 +89,7 @@ bool Parse(int argc, char** argv, Options* o) {
                     "device (hapco-phantom --help)",
                     "Device");
   command.AddForceTimeout(&o->timeout_ms);
+  command.AddMaxAnswerAge(&o->max_answer_age_ms);
   command.AddRendering(&o->render, &o->max_model_stiffness_n_per_m);
   command.AddDomain(&o->domain);
   command.AddSecurity(&o->security_dir,
@@ -377,6 +379,7 @@ int Run(const Options& o) {
   base.trajectory = o.loop ? loadtest::LoopTrajectory(points, base.ticks) : points;
   base.scene_name = scene.name;
   base.safety.timeout_s = o.timeout_ms * 1e-3;
+  base.safety.max_answer_age_s = o.max_answer_age_ms * 1e-3;
   base.connect_timeout_s = o.connect_timeout_s;
   base.drain_ticks = static_cast<int>(std::lround(o.timeout_ms));
   base.render = o.rendering;
@@ -638,6 +641,12 @@ int Run(const Options& o) {
   if (o.rendering.mode == phantom::RenderMode::kLocalModel || o.rendering.passivity) {
     std::printf("rendering: %llu ticks from a local model; passivity controller dissipated %.4f J\n",
                 static_cast<unsigned long long>(all.model_ticks), all.dissipated_j);
+  }
+  uint64_t old_answers = 0;
+  for (const auto* r : ran) old_answers += r->client->stats().stale_answers;
+  if (old_answers > 0) {
+    std::printf("answers to poses older than %.0f ms (after an outage?), not rendered: %llu\n", o.max_answer_age_ms,
+                static_cast<unsigned long long>(old_answers));
   }
   for (const auto& row : rows) PrintRow(row);
   PrintRow(all);

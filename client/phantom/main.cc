@@ -37,6 +37,7 @@ struct Options {
   std::string scene_path, client_id, mode = "kinematic", trajectory = "scene", csv_path, security_dir, server_id;
   std::string render = "auto";
   int domain = 0, rt_priority = 0;
+  double max_answer_age_ms = 500;
   double duration_s = 0, timeout_ms = 50, connect_timeout_s = 30, max_model_stiffness_n_per_m = 3000;
 };
 
@@ -54,6 +55,7 @@ bool Parse(int argc, char** argv, Options* o) {
                     "positions quantised to 0.023 mm",
                     "Device");
   command.AddForceTimeout(&o->timeout_ms);
+  command.AddMaxAnswerAge(&o->max_answer_age_ms);
   command.AddRendering(&o->render, &o->max_model_stiffness_n_per_m);
   command.AddText("--trajectory", &o->trajectory, "T",
                   "scene (default: the scene's phases, one step per tick) or a CSV file, one row per tick, columns "
@@ -132,6 +134,7 @@ int Run(const Options& o) {
   config.scene_name = scene.name;
   config.server_id = o.server_id;
   config.safety.timeout_s = o.timeout_ms * 1e-3;
+  config.safety.max_answer_age_s = o.max_answer_age_ms * 1e-3;
   config.connect_timeout_s = o.connect_timeout_s;
   config.drain_ticks = static_cast<int>(std::lround(o.timeout_ms));
   phantom::ParseRendering(o.render, config.mode == phantom::DriveMode::kHand, &config.render);  // a checked choice
@@ -198,6 +201,10 @@ int Run(const Options& o) {
               static_cast<unsigned long long>(s.server_moves),
               static_cast<unsigned long long>(s.server_leases_lapsed),
               static_cast<unsigned long long>(s.server_leases_regained));
+  if (s.stale_answers > 0) {
+    std::printf("  %llu answers to poses older than %.0f ms (the oldest %.0f ms: after an outage?) not rendered\n",
+                static_cast<unsigned long long>(s.stale_answers), o.max_answer_age_ms, s.oldest_stale_answer_s * 1e3);
+  }
   if (s.foreign_forces > 0) {
     std::printf("  %llu forces for poses this device never sent, not rendered: another device uses the client id "
                 "'%s'? Give each device its own --client-id\n",

@@ -30,6 +30,11 @@ struct SafetyParameters {
   // still change the force by at most max_change_per_tick_n each: never a jump.
   double ramp_s = 0.020;
   double tick_s = 0.001;          // servo period, s
+  // An answer to a pose sampled longer ago than this is not rendered, s. After a link outage
+  // the network delivered answers to poses 3 s old: the device, lifted meanwhile, rendered
+  // 1.5-2 N in free air for 11-15 ticks as "forces resumed" (a helper session). 0.5 s is
+  // above the round trips HapCo is documented for (200 ms, docs/network-haptics.md).
+  double max_answer_age_s = 0.5;
 };
 
 class SafetyFilter {

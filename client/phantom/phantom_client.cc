@@ -386,6 +386,7 @@ void PhantomClient::Run(const std::atomic<bool>& stop, const std::function<void(
   bool any_force = false, was_stale = false;
   double last_notice_log_s = -1;  // when the last "server ignores poses" line was logged
   double last_foreign_log_s = -1;  // when the last "forces for poses never sent" line was logged
+  double last_stale_answer_log_s = -1;  // when the last "answers to poses ... old" line was logged
   // Send time of the last kSentPoses poses by sequence % kSentPoses (8 s at 1 kHz: an answer
   // later than that is stale anyway); 0 = none sent (MonotonicNowNs is never 0 after boot).
   std::vector<int64_t> sent_time_ns(kSentPoses, 0);
@@ -512,6 +513,24 @@ void PhantomClient::Run(const std::atomic<bool>& stop, const std::function<void(
       }
       if (any_force && r.pose_sequence <= last_force_sequence) {
         ++stats_.forces_reordered;
+        continue;
+      }
+      // An answer to a pose long past (delivered after an outage) says nothing about where the
+      // device is now: not a new force, so the timeout ramp goes on (SafetyParameters).
+      const double age_s = static_cast<double>(now - r.client_time_ns) * 1e-9;
+      if (age_s > config_.safety.max_answer_age_s) {
+        ++stats_.stale_answers;
+        stats_.oldest_stale_answer_s = std::max(stats_.oldest_stale_answer_s, age_s);
+        if (log && (last_stale_answer_log_s < 0 || now_s - last_stale_answer_log_s >= 1.0)) {
+          last_stale_answer_log_s = now_s;
+          char line[200];
+          std::snprintf(line, sizeof(line),
+                        "t=%.3f s: answers to poses %.0f ms old arrive (%llu so far): not rendered "
+                        "(--max-answer-age-ms %.0f)",
+                        now_s, age_s * 1e3, static_cast<unsigned long long>(stats_.stale_answers),
+                        config_.safety.max_answer_age_s * 1e3);
+          log(line);
+        }
         continue;
       }
       if (!any_force) stats_.first_force_arrival_ns = r.arrival_ns;

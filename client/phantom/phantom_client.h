@@ -104,6 +104,9 @@ struct ClientStats {
   // Answers to poses this device never sent (sequence and send time match none of its own):
   // another device under the same client id. Logged, never rendered.
   uint64_t foreign_forces = 0;
+  // Answers older than SafetyParameters::max_answer_age_s when they arrived: not rendered.
+  uint64_t stale_answers = 0;
+  double oldest_stale_answer_s = 0;  // the oldest of them, s
   uint64_t arrivals_overflowed = 0; // arrival queue full (tick thread stalled): dropped
   uint64_t missed_ticks = 0;        // servo deadlines that passed without a tick
   uint64_t stale_ticks = 0, rejected_non_finite = 0, clamped = 0;

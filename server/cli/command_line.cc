@@ -404,6 +404,14 @@ CLI::Option* CommandLine::AddForceTimeout(double* milliseconds) {
                    "Device", 0, HUGE_VAL, true);
 }
 
+CLI::Option* CommandLine::AddMaxAnswerAge(double* milliseconds) {
+  return AddNumber("--max-answer-age-ms", milliseconds, "T",
+                   "an answer to a pose sampled more than T ms ago is not rendered, only counted: after a "
+                   "network outage the answers to poses long past arrive (default 500, above the 200 ms "
+                   "round trips the rendering modes are measured at)",
+                   "Device", 1, 60000);
+}
+
 void CommandLine::AddRendering(std::string* mode, double* max_model_stiffness_n_per_m) {
   AddChoice("--render", mode, {"auto", "direct", "direct+passivity", "local-model", "local-model+passivity"},
             "direct: the newest force, held until the next; local-model: the model sent with the newest "
@@ -413,8 +421,9 @@ void CommandLine::AddRendering(std::string* mode, double* max_model_stiffness_n_
             "energy it dissipates is reported; direct+passivity suits round trips of a few ms only: from 50 ms it oscillates, "
             "docs/network-haptics.md). auto (default): direct "
             "with --mode kinematic (forces compare with hapco-sim), local-model+passivity with --mode hand "
-            "(passive and without oscillation up to a 200 ms round trip and 10 % loss, "
-            "docs/network-haptics.md)",
+            "(passive and without oscillation up to a 200 ms round trip and 10 % loss with jitter up to "
+            "+-5 ms; jitter with loss dips its energy to about -1e-3 J, and reordering beyond +-40 ms starves "
+            "it of forces: docs/network-haptics.md, \"Limits\")",
             "Device");
   AddNumber("--max-model-stiffness-n-per-m", max_model_stiffness_n_per_m, "K",
             "local-model: a contact stiffer than K N/m is rendered as the same wall made softer, at the "

@@ -89,6 +89,8 @@ class CommandLine {
   CLI::Option* AddConnectTimeout(double* seconds, const std::string& help);
   // --force-timeout-ms T: no new force for T ms -> the rendered force ramps to zero.
   CLI::Option* AddForceTimeout(double* milliseconds);
+  // --max-answer-age-ms T: answers to poses older than T ms are not rendered (phantom.h).
+  CLI::Option* AddMaxAnswerAge(double* milliseconds);
   // --render auto|direct|direct+passivity|local-model|local-model+passivity and
   // --max-model-stiffness-n-per-m K: how a client renders the forces it receives
   // (client/phantom/force_renderer.h, docs/network-haptics.md), group Device.

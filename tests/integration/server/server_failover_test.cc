@@ -186,6 +186,77 @@ TEST(ServerFailover, ClientRampsToZeroWhenTheServerDiesAndResumesWhenOneReturns)
   EXPECT_NE(ReadFile(dir + "/server2.out").find("1 sessions opened"), std::string::npos);
 }
 
+// A server stalled for 0.8 s (SIGSTOP: a host that froze, a link that came back) answers, once
+// it runs again, the poses queued since the stall began. Those answers are 0.8 s old: the
+// device may be anywhere by then, so they are not rendered (a helper session saw a device
+// lifted into free air render 1.5-2 N for 11-15 ticks as "forces resumed", from answers to
+// poses 3 s old). The fresh answers after them are.
+TEST(ServerFailover, AnswersToPosesLongPastAreNotRenderedAfterAServerStall) {
+  const std::string dir = TestDir();
+  const dds_domainid_t domain = SetUpTestDomain();
+  const std::string trajectory = WritePressTrajectory(dir);
+  Participant participant(domain);
+  Topic<hapco_idl_DevicePose> pose_topic(participant);
+  Topic<hapco_idl_FeedbackForce> force_topic(participant);
+  Subscriber client_subscriber(participant, ClientPartition("phantom-1"));
+  Reader<hapco_idl_DevicePose> pose_reader(client_subscriber, pose_topic);
+  Reader<hapco_idl_FeedbackForce> force_reader(client_subscriber, force_topic);
+  Process server({HAPCO_SERVER_EXE, kScene, "--domain", std::to_string(domain)}, dir + "/server.out",
+                 dir + "/server.err");
+  Process phantom({HAPCO_PHANTOM_EXE, kScene, "--client-id", "phantom-1", "--domain", std::to_string(domain),
+                   "--trajectory", trajectory, "--duration-s", "4", "--csv", dir + "/phantom.csv",
+                   "--connect-timeout-s", "60"},
+                  dir + "/phantom.out", dir + "/phantom.err");
+  // Stall the server while it pushes back, for 800 of the client's ticks (its poses count them).
+  hapco_idl_FeedbackForce force{};
+  uint64_t stalled_after = 0;
+  const dds_time_t deadline = dds_time() + DDS_SECS(60);
+  while (stalled_after == 0 && dds_time() < deadline) {
+    if (!force_reader.WaitForData(DDS_MSECS(100))) continue;
+    while (force_reader.Take(&force)) {
+      const double norm = std::sqrt(force.force_n.x * force.force_n.x + force.force_n.y * force.force_n.y +
+                                    force.force_n.z * force.force_n.z);
+      if (force.pose_sequence >= 100 && norm > 1.0) stalled_after = force.pose_sequence;
+    }
+  }
+  ASSERT_GT(stalled_after, 0u) << "no force above 1 N: " << ReadFile(dir + "/server.err");
+  server.Signal(SIGSTOP);
+  hapco_idl_DevicePose pose{};
+  bool reached = false;
+  while (!reached && dds_time() < deadline) {
+    if (!pose_reader.WaitForData(DDS_MSECS(100))) continue;
+    while (pose_reader.Take(&pose)) reached = reached || pose.sequence_number >= stalled_after + 800;
+  }
+  server.Signal(SIGCONT);
+  ASSERT_TRUE(reached) << "the phantom stopped publishing";
+  ASSERT_EQ(phantom.Wait(60'000), 0) << ReadFile(dir + "/phantom.err");
+  server.Signal(SIGTERM);
+  ASSERT_EQ(server.Wait(30'000), 0) << ReadFile(dir + "/server.err");
+  const std::string phantom_out = ReadFile(dir + "/phantom.out");
+  std::printf("%s", phantom_out.c_str());
+
+  unsigned long long old_answers = 0;
+  const auto at = phantom_out.find(" answers to poses older than 500 ms");
+  ASSERT_NE(at, std::string::npos) << "no answer to a pose queued during the stall arrived";
+  ASSERT_EQ(std::sscanf(phantom_out.c_str() + phantom_out.rfind('\n', at) + 1, " %llu", &old_answers), 1);
+  EXPECT_GE(old_answers, 1u);
+  // No force taken (rendered) was an answer to a pose older than 500 ms.
+  std::size_t rows = 0, fresh_after_stall = 0;
+  double before_n = 0;
+  for (const auto& row : ReadCsv(dir + "/phantom.csv")) {
+    ++rows;
+    const long long sequence = std::stoll(row.at("force_sequence"));
+    if (sequence < 0) continue;
+    EXPECT_LE(std::stod(row.at("round_trip_us")), 500e3) << "tick " << row.at("tick");
+    if (static_cast<uint64_t>(sequence) <= stalled_after) before_n = Vec(row, "fx_n", "fy_n", "fz_n").norm();
+    if (static_cast<uint64_t>(sequence) > stalled_after + 800) ++fresh_after_stall;
+  }
+  EXPECT_GE(rows, 4000u);
+  EXPECT_GT(fresh_after_stall, 500u) << "fresh forces resumed after the stall";
+  EXPECT_GT(before_n, 1.0);
+  EXPECT_NE(ReadFile(dir + "/phantom.err").find("not rendered (--max-answer-age-ms 500)"), std::string::npos);
+}
+
 TEST(ServerFailover, AClientBeyondMaxSessionsIsRefusedWithAClearMessage) {
   const std::string dir = TestDir();
   const dds_domainid_t domain_id = SetUpTestDomain();
