@@ -173,6 +173,16 @@ def csc_writer(g):
     write_matrix(g, 9, 9, -1, len(x), p, i, x)
 
 
+def scaled_single_contact_writer(scale):
+    """One contact, W = scale * I (compressed columns): with q = scale * (-0.5, 0.3, 0) and mu 0.3
+    the contact is pressed and slides, r = (0.5, -0.15, 0) at any scale (by hand: sticking would
+    need r_t = -0.3, outside the cone 0.15)."""
+    def writer(g):
+        p, i, x = csc(scale * np.eye(3))
+        write_matrix(g, 3, 3, -1, len(x), p, i, x)
+    return writer
+
+
 def upper_triangle_triplet(g):
     e = [t for t in triplet_entries("col") if t[0] <= t[1]]
     write_matrix(g, 9, 9, len(e), len(e), [c for _, c, _ in e], [r for r, _, _ in e],
@@ -248,6 +258,10 @@ def main():
         doubles(s, "u", [0.5 * k for k in range(9)])
         doubles(s, "r", [1.0 + k for k in range(9)])
 
+    # The same sliding contact in units 1e12 and 1e-12 apart (a helper's hapco-solve called it
+    # "separating" resp. "sticking": states judged on one scale for forces and displacements).
+    for scale, name in ((1e12, "scaled_1e12_sliding.hdf5"), (1e-12, "scaled_1e-12_sliding.hdf5")):
+        local_file(path(name), scaled_single_contact_writer(scale), q=[-0.5 * scale, 0.3 * scale, 0.0], mu=[0.3])
     local_file(path("roundoff_asymmetric_csr.hdf5"), roundoff_csr,
                info={"title": "W symmetric up to round-off (1e-6 relative)"})
     global_file(path("siconos_global_triplet.hdf5"), "siconos")

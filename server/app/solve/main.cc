@@ -26,7 +26,7 @@ constexpr int kExitConverged = 0;
 constexpr int kExitNotConverged = 2;
 
 constexpr const char* kDescription =
-    R"(Reads a local friction-contact problem u = W r + q (FCLIB file, /fclib_local: W, q, mu; spacedim 3; W in compressed columns, compressed rows or triplets, as Siconos or libfclib write it), solves it and prints: the file, the number of contacts, the mu range, the solver, its status, outer/inner iterations, time, the fc3d error, the paper error, libfclib's merit and the number of contacts separating/sticking/sliding (r_n resp. the slip ||u_t|| compared with 100 * tol * max(||q||, ||r||, ||u||)).
+    R"(Reads a local friction-contact problem u = W r + q (FCLIB file, /fclib_local: W, q, mu; spacedim 3; W in compressed columns, compressed rows or triplets, as Siconos or libfclib write it), solves it and prints: the file, the number of contacts, the mu range, the solver, its status, outer/inner iterations, time, the fc3d error, the paper error, libfclib's merit and the number of contacts separating/sticking/sliding (r_n compared with 100 * tol * ||r||, the slip ||u_t|| with 100 * tol * max(||q||, ||u||)).
 
 A W symmetric only up to round-off (max|W - W^T| / max|W| <= 1e-4, printed) is solved with its symmetric part, then refined on the stored W, and every error is reported on the stored W.
 
@@ -175,15 +175,20 @@ void PrintSolve(const Options& options, const contact::ContactProblem& judged, c
   std::printf("paper error   %.3e (units of W r, m for HapCo problems; rho %.4g)\n", stats.paper_error_m,
               stats.rho);
   std::printf("fclib merit   %.3e (libfclib MERIT_1)\n", fclib::FclibMeritLocal(judged, solve.result.force_n));
-  // States from tolerances relative to the fc3d scale: the solver's own counts use the
-  // paper tolerance, which is off here (projection.h ClassifyContact).
+  // States from tolerances relative to each quantity's own scale (projection.h ClassifyContact;
+  // the solver's own counts use the paper tolerance, which is off here): r_n against the forces,
+  // the slip against the displacements. One scale for both mixed units: a problem scaled by
+  // 1e12 called a pressed, sliding contact "separating", by 1e-12 a sliding one "sticking" (a
+  // helper session).
   const Eigen::VectorXd u = judged.flexibility_m_per_n * solve.result.force_n + judged.free_displacement_m;
-  const double scale = std::max({judged.free_displacement_m.norm(), solve.result.force_n.norm(), u.norm()});
-  const double state_tolerance = std::max(100.0 * options.fc3d_tolerance, 1e-12) * scale;
+  const double relative = std::max(100.0 * options.fc3d_tolerance, 1e-12);
+  const double force_tolerance = relative * std::max(solve.result.force_n.norm(), std::numeric_limits<double>::min());
+  const double slip_tolerance =
+      relative * std::max({judged.free_displacement_m.norm(), u.norm(), std::numeric_limits<double>::min()});
   const std::array<int, 3> states =
-      contact::CountContactStates(solve.result.force_n, u, state_tolerance, state_tolerance);
-  std::printf("states        separating %d, sticking %d, sliding %d (tolerance %.2e)\n", states[0], states[1],
-              states[2], state_tolerance);
+      contact::CountContactStates(solve.result.force_n, u, force_tolerance, slip_tolerance);
+  std::printf("states        separating %d, sticking %d, sliding %d (r_n above %.2e, slip above %.2e)\n", states[0],
+              states[1], states[2], force_tolerance, slip_tolerance);
 }
 
 int ExitCodeOf(contact::SolverStatus status) {
