@@ -55,7 +55,8 @@ void ValidateSecurityIdentity(const SecurityIdentity& identity) {
   }
   const X509Ptr certificate = ReadCertificate(cert_path, "the identity certificate");
   const X509Ptr ca = ReadCertificate(FileOf(identity, "public/identity_ca.pem"), "the identity CA");
-  RequireFile(FileOf(identity, identity.name + "/key.pem"), "the private key");
+  const std::string key_path = FileOf(identity, identity.name + "/key.pem");
+  RequireFile(key_path, "the private key");
   RequireFile(FileOf(identity, identity.name + "/permissions.xml.p7s"), "the signed permissions");
   RequireFile(FileOf(identity, "public/governance.xml.p7s"), "the signed governance");
   RequireFile(FileOf(identity, "public/permissions_ca.pem"), "the permissions CA");
@@ -77,6 +78,24 @@ void ValidateSecurityIdentity(const SecurityIdentity& identity) {
   if (X509_cmp_current_time(X509_get0_notAfter(certificate.get())) <= 0) {
     throw InputError("security: the certificate " + cert_path + " has expired: make a new one with "
                      "scripts/dds-security renew " + identity.dir + " " + identity.name);
+  }
+  // The key must be the certificate's: with another identity's key.pem the handshake fails
+  // inside DDS ("Failed to finalize digest context" on the server, once a second) and the
+  // client only hears that no server answers (a helper session).
+  if (std::FILE* file = std::fopen(key_path.c_str(), "r")) {
+    EVP_PKEY* key = PEM_read_PrivateKey(file, nullptr, nullptr, const_cast<char*>(""));
+    std::fclose(file);
+    if (key == nullptr) {
+      throw InputError("security: " + key_path + " is not an unencrypted PEM private key (DDS Security reads it "
+                       "without a passphrase)");
+    }
+    const bool matches = X509_check_private_key(certificate.get(), key) == 1;
+    EVP_PKEY_free(key);
+    if (!matches) {
+      throw InputError("security: the private key " + key_path + " does not belong to the certificate " + cert_path +
+                       " (copied from another identity?): scripts/dds-security renew " + identity.dir + " " +
+                       identity.name + " makes a matching pair");
+    }
   }
   // Revoked (scripts/dds-security revoke): Cyclone reads the same CRL; say so before it does.
   const std::string crl_path = FileOf(identity, "public/crl.pem");

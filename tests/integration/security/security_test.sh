@@ -121,6 +121,14 @@ CYCLONEDDS_URI="file://$loopback,file://$work/dep/carol/security.xml" phantom ca
 if [ $code -ne 0 ] && ! grep -q "forces received" "$work/expired-dds.out"; then ok "expired (DDS itself): exit $code"
 else bad "expired certificate accepted by DDS: exit $code"; fi
 
+# frank's certificate with alice's private key: the handshake failed inside DDS and the client
+# heard only "no hapco-server found" (a helper session).
+"$scripts/dds-security" add-client "$work/dep" frank >/dev/null || exit 1
+cp "$work/dep/alice/key.pem" "$work/dep/frank/key.pem"
+phantom frank "$work/wrongkey" --security "$work/dep"; code=$?
+if [ $code -eq 1 ] && grep -q "frank/key.pem does not belong to the certificate .*frank/cert.pem (copied from another identity?): scripts/dds-security renew" "$work/wrongkey.err"; then ok "another identity's key: $(cat "$work/wrongkey.err")"
+else bad "another identity's key: exit $code: $(cat "$work/wrongkey.err")"; fi
+
 CYCLONEDDS_URI="file://$loopback,file://$work/dep/alice/security.xml" phantom bob "$work/impostor"; code=$?
 if [ $code -eq 3 ] && grep -q "Not Allowed By Security" "$work/impostor.err"; then ok "alice's identity claiming bob: exit 3, writer refused"
 else bad "alice claiming bob: exit $code: $(tail -1 "$work/impostor.err")"; fi
