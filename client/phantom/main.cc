@@ -22,6 +22,7 @@
 #include "phantom.h"
 #include "phantom_client.h"
 #include "service/dds.h"
+#include "service/dds_log.h"
 
 namespace {
 
@@ -187,7 +188,7 @@ int Run(const Options& o) {
               "  round trip (pose sampled -> force arrived): p50 %.0f us, p99 %.0f us, p99.9 %.0f us, max %.0f us\n"
               "  render latency (pose sampled -> rendering tick): p50 %.0f us, p99 %.0f us; server step+publish p50 %.0f us, p99 %.0f us\n"
               "  missed ticks %llu, stale ticks %llu, force timeouts %llu, resumed %llu, NaN forces %llu, clamped %llu, "
-              "peak rendered force %.3f N, pose write errors %llu\n"
+              "peak rendered force %.3f N, pose write errors %llu (sends DDS logged as failed in the network %llu)\n"
               "  served by '%s' at the end, moved to another server %llu times; leases of any server on the domain lapsed %llu, came back %llu\n",
               o.client_id.c_str(), s.ticks_run, static_cast<unsigned long long>(s.poses_published),
               static_cast<unsigned long long>(s.forces_received), g_stop.load() ? " (stopped by signal)" : "",
@@ -197,7 +198,8 @@ int Run(const Options& o) {
               static_cast<unsigned long long>(s.stale_ticks), static_cast<unsigned long long>(s.server_losses),
               static_cast<unsigned long long>(s.resumptions), static_cast<unsigned long long>(s.rejected_non_finite),
               static_cast<unsigned long long>(s.clamped), s.peak_rendered_n,
-              static_cast<unsigned long long>(s.pose_write_errors), s.server_id.c_str(),
+              static_cast<unsigned long long>(s.pose_write_errors),
+              static_cast<unsigned long long>(hapco::service::DdsSendFailuresLogged()), s.server_id.c_str(),
               static_cast<unsigned long long>(s.server_moves),
               static_cast<unsigned long long>(s.server_leases_lapsed),
               static_cast<unsigned long long>(s.server_leases_regained));

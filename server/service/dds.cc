@@ -3,6 +3,7 @@
 #include <cstring>
 
 #include "common/error.h"
+#include "service/dds_log.h"
 
 namespace hapco::service {
 
@@ -13,6 +14,7 @@ Domain::Domain(dds_domainid_t domain_id, const std::string& config)
 namespace {
 
 dds_entity_t CreateParticipant(dds_domainid_t domain_id, const SecurityIdentity& identity) {
+  InstallDdsLogLimiter();  // before DDS starts its threads and logs
   if (!identity.enabled()) return dds_create_participant(domain_id, nullptr, nullptr);
   std::unique_ptr<dds_qos_t, decltype(&dds_delete_qos)> qos(CreateSecurityQos(identity), &dds_delete_qos);
   const dds_entity_t participant = dds_create_participant(domain_id, qos.get(), nullptr);
