@@ -182,15 +182,14 @@ void ServerLoop::CloseIdleSessions(int64_t now_ns) {
       char seconds[32];
       std::snprintf(seconds, sizeof seconds, "%.1f", static_cast<double>(now_ns - it->second.last_heard_ns) * 1e-9);
       ++counters_.idle_sessions_closed;
-      Log(kLogSession, "session closed for '" + it->first + "': nothing heard from it for " + seconds +
+      CloseSession(it, std::string("nothing heard from it for ") + seconds +
                            " s (--session-idle-s); it gets a new session if it comes back");
-      CloseSession(it);
     }
     it = next;
   }
 }
 
-void ServerLoop::CloseSession(std::map<std::string, Client>::iterator it) {
+void ServerLoop::CloseSession(std::map<std::string, Client>::iterator it, const std::string& why) {
   const SessionCounters& c = it->second.session->counters();
   closed_session_counters_.steps += c.steps;
   closed_session_counters_.model_answers += c.model_answers;
@@ -207,7 +206,8 @@ void ServerLoop::CloseSession(std::map<std::string, Client>::iterator it) {
   stage_times_.force_write_ns += t.force_write_ns;
   stage_times_.frame_ns += t.frame_ns;
   stage_times_.poses += t.poses;
-  Log(kLogSession, "session closed for '" + it->first + "'");
+  // One line per close, with its reason (an idle close was logged twice: a helper session).
+  Log(kLogSession, "session closed for '" + it->first + "': " + why);
   // Its DDS writers are deleted on the deleter's thread: dds_delete took 97-142 ms here, a
   // stall of every other session (background_deleter.h).
   retired_sessions_.Retire(std::move(it->second.session));
@@ -278,8 +278,7 @@ void ServerLoop::ProcessSessionControls() {
       // never gets two servers' forces; server_choice.h).
       if (control.command == hapco_idl_SESSION_JOIN && it != sessions_.end()) {
         ++counters_.sessions_moved_away;
-        Log(kLogSession, "'" + id + "' joined server '" + ServerIdOf(control.server_id) + "': its session here closes");
-        CloseSession(it);
+        CloseSession(it, "it joined server '" + ServerIdOf(control.server_id) + "'");
       }
       continue;
     }
@@ -293,11 +292,11 @@ void ServerLoop::ProcessSessionControls() {
           ++counters_.refused_sessions;
           Log(kLogClient, "session refused for '" + id + "': unknown scene '" + scene_name +
                               "' (this server has: " + SceneNames() + ")");
-          if (it != sessions_.end()) CloseSession(it);
+          if (it != sessions_.end()) CloseSession(it, "it asked for the unknown scene '" + scene_name + "'");
           break;
         }
         if (it != sessions_.end() && &it->second.session->model() != model) {
-          CloseSession(it);  // the client switches scene: a new session on the new one
+          CloseSession(it, "it switches to scene '" + scene_name + "'");  // a new session on the new one
           it = sessions_.end();
         }
         if (it == sessions_.end()) {
@@ -321,7 +320,7 @@ void ServerLoop::ProcessSessionControls() {
       }
       case hapco_idl_SESSION_LEAVE:
         if (it != sessions_.end()) {
-          CloseSession(it);
+          CloseSession(it, "it left");
           // Poses of this client still in flight must not reopen the session: it has to
           // SESSION_JOIN again (a restarted server, which has no such record, still opens a
           // session on a client's first pose, so clients resume after a server restart).
@@ -384,8 +383,7 @@ void ServerLoop::ProcessPoses() {
       if (it != sessions_.end() && pose.server_id[0] != '\0' &&
           pose.client_time_ns > std::max(it->second.joined_client_time_ns, it->second.first_client_time_ns)) {
         ++counters_.sessions_moved_away;
-        Log(kLogSession, "'" + id + "' is served by '" + ServerIdOf(pose.server_id) + "': its session here closes");
-        CloseSession(it);
+        CloseSession(it, "it is served by '" + ServerIdOf(pose.server_id) + "' now");
       }
       continue;
     }

@@ -153,7 +153,7 @@ class ServerLoop {
   bool OpenWaitingSessions(int64_t now_ns);
   Client* OpenSession(const std::string& client_id, const sim::TwoBodyModel& model);
   // The served scene called `scene_name` (the first one for ""), nullptr if none.
-  void CloseSession(std::map<std::string, Client>::iterator it);  // counters kept, logged
+  void CloseSession(std::map<std::string, Client>::iterator it, const std::string& why);  // counters kept, logged
   const sim::TwoBodyModel* FindModel(const std::string& scene_name) const;
   std::string SceneNames() const;  // "a, b" for messages
   void Count(PoseVerdict verdict, const std::string& client_id);
