@@ -91,12 +91,9 @@ struct PhantomClient::Dds {
       a.writer_handle = info.publication_handle;
       {
         std::lock_guard<std::mutex> lock(servers_mutex);
-        auto known = std::find_if(servers.begin(), servers.end(),
-                                  [&a](const service::ServerAnnouncement& s) { return s.server_id == a.server_id; });
-        if (known != servers.end()) {
-          *known = std::move(a);
-        } else if (servers.size() < 256) {
-          servers.push_back(std::move(a));
+        if (service::RecordAnnouncement(servers, std::move(a), 256) == service::LeaseChange::kRegained) {
+          ++leases_regained;
+          last_lease_regained_ns = MonotonicNowNs();
         }
       }
       servers_changed.notify_all();

@@ -77,6 +77,20 @@ LeaseChange ApplyLivelinessChange(std::span<ServerAnnouncement> servers, uint64_
   return LeaseChange::kNone;
 }
 
+LeaseChange RecordAnnouncement(std::vector<ServerAnnouncement>& servers, ServerAnnouncement announcement,
+                               std::size_t max_servers) {
+  auto known = std::find_if(servers.begin(), servers.end(), [&announcement](const ServerAnnouncement& s) {
+    return s.server_id == announcement.server_id;
+  });
+  if (known == servers.end()) {
+    if (servers.size() < max_servers) servers.push_back(std::move(announcement));
+    return LeaseChange::kNone;
+  }
+  const bool was_lapsed = known->lease_lapsed;
+  *known = std::move(announcement);  // its data came: alive (lease_lapsed false)
+  return was_lapsed ? LeaseChange::kRegained : LeaseChange::kNone;
+}
+
 std::optional<std::string> ChooseServer(std::span<const ServerAnnouncement> servers, std::string_view client_id,
                                         std::string_view scene, std::string_view avoid, int64_t now_ns,
                                         int64_t max_age_ns) {

@@ -52,6 +52,14 @@ enum class LeaseChange {
 LeaseChange ApplyLivelinessChange(std::span<ServerAnnouncement> servers, uint64_t writer_handle,
                                   int32_t alive_count_change);
 
+// Records a new announcement (a ServerStatus sample) among `servers` (at most `max_servers`
+// kept). Returns kRegained when it replaces the announcement of a server whose lease had
+// lapsed: a lease lost for longer than DDS keeps a silent writer (10 s and more) comes back as
+// a new writer whose samples, not a liveliness change, end the lapse (a helper counted "lapsed
+// 1, came back 0" with forces flowing again); kNone otherwise.
+LeaseChange RecordAnnouncement(std::vector<ServerAnnouncement>& servers, ServerAnnouncement announcement,
+                               std::size_t max_servers);
+
 // Chooses the server for `client_id` joining `scene` ("" = the server's first scene): among
 // the servers heard within max_age_ns of now_ns whose lease has not lapsed, that serve the scene and have a free session,
 // not `avoid` (the server a client leaves) unless it is the only one, the one with the

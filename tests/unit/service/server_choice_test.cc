@@ -72,6 +72,27 @@ TEST(ChooseServer, AServerWhoseLeaseLapsedIsNeitherChosenNorLiveUntilItIsAliveAg
   EXPECT_EQ(ChooseServer(servers, "c", "bench1", "", kNow, kMaxAge), "a-dead");
 }
 
+// After a lapse longer than DDS keeps a silent writer, the server comes back as a new writer:
+// its first announcement ends the lapse and counts as the lease coming back (a helper saw
+// "lapsed 1, came back 0" with forces flowing again).
+TEST(ChooseServer, AnAnnouncementFromALapsedServerEndsTheLapseOnce) {
+  std::vector<ServerAnnouncement> servers = {Server("a", 0)};
+  servers[0].writer_handle = 11;
+  ASSERT_EQ(ApplyLivelinessChange(servers, 11, -1), LeaseChange::kLapsed);
+  ServerAnnouncement again = Server("a", 1);
+  again.writer_handle = 21;  // rediscovered: another handle
+  EXPECT_EQ(ApplyLivelinessChange(servers, 21, +1), LeaseChange::kNone) << "the new writer was never known";
+  EXPECT_EQ(RecordAnnouncement(servers, again, 256), LeaseChange::kRegained);
+  EXPECT_FALSE(servers[0].lease_lapsed);
+  EXPECT_EQ(servers[0].writer_handle, 21u);
+  EXPECT_EQ(RecordAnnouncement(servers, again, 256), LeaseChange::kNone) << "counted once";
+  EXPECT_EQ(ApplyLivelinessChange(servers, 21, +1), LeaseChange::kNone) << "already alive: not counted again";
+  // A new server is recorded, up to the limit.
+  EXPECT_EQ(RecordAnnouncement(servers, Server("b", 0), 2), LeaseChange::kNone);
+  EXPECT_EQ(RecordAnnouncement(servers, Server("c", 0), 2), LeaseChange::kNone);
+  EXPECT_EQ(servers.size(), 2u);
+}
+
 TEST(ChooseServer, ClientsJoiningAtOnceSpreadOverEquallyLoadedServers) {
   // Every client reads the same announcements (all empty): the tie-break must not send them
   // all to one server. 300 ids over three servers: each gets a share near a third.
