@@ -538,7 +538,32 @@ std::string WithMissingBraceHint(const std::string& message) {
 
 }  // namespace
 
+namespace {
+
+// What a file that is not scene text is, from its first bytes: given a recording or an FCLIB
+// file, the tools answered "...:1:13: Interpreting non ascii codepoint 249." (a helper session).
+std::string NotSceneText(const std::string& text) {
+  if (text.rfind("HAPCOREC", 0) == 0) {
+    return "a HapCo recording, not a scene file (hapco-report reads recordings; the scene a recording was made "
+           "with is in its header)";
+  }
+  if (text.rfind("\x89HDF\r\n", 0) == 0) return "an HDF5 file (an FCLIB problem? hapco-solve reads those), not a scene file";
+  if (text.rfind("$MeshFormat", 0) == 0) return "a Gmsh mesh, not a scene file (a scene names its mesh: docs/mesh-scenes.md)";
+  // Text scene files are UTF-8 text: a NUL or other control bytes early on mean a binary file.
+  const std::size_t head = std::min<std::size_t>(text.size(), 4096);
+  for (std::size_t i = 0; i < head; ++i) {
+    const auto byte = static_cast<unsigned char>(text[i]);
+    if (byte == 0 || (byte < 0x20 && byte != '\n' && byte != '\r' && byte != '\t' && byte != '\f' && byte != '\v')) {
+      return "a binary file, not a scene file (scenes are protobuf text: proto/scene.proto, proto/scenes/)";
+    }
+  }
+  return "";
+}
+
+}  // namespace
+
 sim::SceneSpec ParseSceneText(const std::string& text, const std::string& source_name) {
+  if (const std::string what = NotSceneText(text); !what.empty()) throw InputError(source_name + ": " + what);
   pb::Scene scene;
   TextFormat::Parser parser;
   FirstErrorCollector errors;

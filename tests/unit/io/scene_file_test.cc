@@ -100,6 +100,20 @@ TEST(SceneFileTest, SyntaxErrorNamesLineAndColumn) {
   EXPECT_NE(message.find("\"=\""), std::string::npos) << message;
 }
 
+// Given a recording, an FCLIB file or another binary file, the tools answered
+// "...:1:13: Interpreting non ascii codepoint 249." (a helper session).
+TEST(SceneFileTest, AFileThatIsNoSceneTextSaysWhatItIs) {
+  EXPECT_EQ(ErrorOf(std::string("HAPCOREC\x01\x02\xf9", 11)),
+            "scene.txtpb: a HapCo recording, not a scene file (hapco-report reads recordings; the scene a recording "
+            "was made with is in its header)");
+  EXPECT_NE(ErrorOf(std::string("\x89HDF\r\n\x1a\n\0\0", 10)).find("an HDF5 file (an FCLIB problem?"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf("$MeshFormat\n4.1 0 8\n").find("a Gmsh mesh"), std::string::npos);
+  EXPECT_NE(ErrorOf(std::string("name: \"x\"\x01\x02", 11)).find("a binary file"), std::string::npos);
+  // Text with a syntax error is still a syntax error with its line.
+  EXPECT_NE(ErrorOf("format_version: 1\nbogus_field: 2\n").find("scene.txtpb:2:"), std::string::npos);
+}
+
 TEST(SceneFileTest, UnknownFieldIsASyntaxErrorWithItsLine) {
   const std::string message =
       ErrorOf(Benchmark1With("force_gain: 0.25", "force_gain: 0.25\nforce_gian: 2"));
