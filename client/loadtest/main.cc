@@ -97,7 +97,7 @@ bool Parse(int argc, char** argv, Options* o) {
                       "add-load-tester DIR PREFIX)");
   command.AddText("--client-prefix", &o->prefix, "P", "client ids P-1..P-N (default lt)", hapco::cli::kGroupDds);
   command.AddConnectTimeout(&o->connect_timeout_s, "wait at most S s for the server (default 30)");
-  command.AddOutputDirectory("--csv-dir", &o->csv_dir, "DIR",
+  CLI::Option* csv_dir = command.AddOutputDirectory("--csv-dir", &o->csv_dir, "DIR",
                   "write DIR/summary.csv (one row per client + \"all\"), DIR/ticks-ID.csv (one row per tick), "
                   "DIR/roundtrip.csv (every force's round trip)",
                   hapco::cli::kGroupOutput);
@@ -108,6 +108,8 @@ bool Parse(int argc, char** argv, Options* o) {
                                        "(needs /usr/bin/python3 with matplotlib)",
                                        hapco::cli::kGroupOutput);
   plots->expected(0, 1);  // the old form `--csv-dir DIR --plots` had no value
+  command.WritesInto(csv_dir, {"summary.csv", "ticks-*.csv", "roundtrip.csv"});
+  command.WritesInto(plots, {"summary.csv", "ticks-*.csv", "roundtrip.csv", "*.png"});
   command.AddRtPriority(&o->rt_priority, "the clients");
   command.AddQuiet(&o->quiet, "no progress line (the results are still printed)");
   command.Deprecate("--timeout-ms", "--force-timeout-ms");

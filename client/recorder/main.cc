@@ -10,6 +10,8 @@
 
 #include <algorithm>
 #include <atomic>
+#include <filesystem>
+#include <functional>
 #include <chrono>
 #include <cstdint>
 #include <cstdio>
@@ -387,19 +389,36 @@ hapco::recording::Header MakeHeader(const Options& o) {
 int Run(const Options& o) {
   hapco::StopSignals stop_signals;
 
+  // The ready file says "this recorder is ready now": one left by an earlier run would pass a
+  // health check before this one is (a helper session), so a stale one goes first, even when
+  // the recording below is refused. It is an empty marker: a file with data at that path is
+  // someone's (a recording given as --ready-file was deleted), so it is refused, not removed.
+  const auto remove_marker = [](const std::string& path) {
+    std::error_code error;
+    if (!path.empty() && std::filesystem::is_regular_file(path, error) && std::filesystem::file_size(path, error) == 0) {
+      std::filesystem::remove(path, error);
+    }
+  };
+  if (!o.ready_file.empty()) {
+    std::error_code error;
+    if (std::filesystem::exists(o.ready_file, error) &&
+        !(std::filesystem::is_regular_file(o.ready_file, error) && std::filesystem::file_size(o.ready_file, error) == 0)) {
+      throw hapco::InputError("--ready-file " + o.ready_file +
+                              " exists and is not an empty marker file: give a path of its own (it is created "
+                              "when the recorder is ready and removed when it stops)");
+    }
+    remove_marker(o.ready_file);
+  }
+  struct ReadyFileRemover {
+    const std::string& path;
+    std::function<void(const std::string&)> remove;
+    ~ReadyFileRemover() { remove(path); }
+  } ready_file_remover{o.ready_file, remove_marker};
+
   // The header goes first, before any DDS traffic: a recorder killed at any time leaves a
   // file with its header. An unwritable path throws InputError (exit 1).
   hapco::io::RecordingWriter writer(
       o.output, MakeHeader(o), o.overwrite ? hapco::io::ExistingFile::kReplace : hapco::io::ExistingFile::kRefuse);
-  // The ready file says "this recorder is ready now": one left by an earlier run would pass a
-  // health check before this one is (a helper session), so it goes at the start and at exit.
-  struct ReadyFileRemover {
-    const std::string& path;
-    ~ReadyFileRemover() {
-      if (!path.empty()) std::remove(path.c_str());
-    }
-  } ready_file_remover{o.ready_file};
-  if (!o.ready_file.empty()) std::remove(o.ready_file.c_str());
   Recorder recorder(&writer);
 
   using namespace hapco::service;

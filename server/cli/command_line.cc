@@ -1,9 +1,11 @@
 #include "cli/command_line.h"
 
+#include <fnmatch.h>
 #include <unistd.h>
 
 
 #include <algorithm>
+#include <cctype>
 #include <cerrno>
 #include <cmath>
 #include <cstdio>
@@ -244,6 +246,11 @@ CLI::Validator OutputFileCheck(const std::string& flag, std::shared_ptr<const CL
           const bool required = *option != nullptr && (*option)->get_required();
           throw InputError(flag + " needs a file name" + (required ? "" : " (leave the option out for no file)"));
         }
+        // "-o=x.rec" gives -o the value "=x.rec" (a short option's value follows a space).
+        if (text[0] == '=') {
+          throw InputError(flag + ": the file name " + Quoted(text) + " starts with '=': write -o " + text.substr(1) +
+                           " or " + flag + "=" + text.substr(1));
+        }
         std::error_code error;
         const std::filesystem::path path(text);
         if (std::filesystem::is_directory(path, error)) throw InputError(flag + ": " + text + " is a directory");
@@ -313,6 +320,10 @@ CLI::Option* CommandLine::AddOutputFileOption(const std::string& names, const st
   return option;
 }
 
+void CommandLine::WritesInto(const CLI::Option* folder_option, std::vector<std::string> patterns) {
+  folder_writes_[folder_option] = std::move(patterns);
+}
+
 void CommandLine::CheckOutputsAreNotInputs() const {
   // An output that is also an input, or another output, destroys what it overwrites before it
   // is read or written: hapco-recorder s.txtpb --output s.txtpb wrote a recording over the
@@ -337,6 +348,28 @@ void CommandLine::CheckOutputsAreNotInputs() const {
   const auto display = [](const CLI::Option* option) {
     return option->get_positional() ? option->get_name(true) : option->get_name();
   };
+  // Inputs among the files an output folder gets.
+  for (const Given& folder : given) {
+    const auto writes = folder_writes_.find(folder.option);
+    if (writes == folder_writes_.end()) continue;
+    for (const Given& other : given) {
+      std::error_code error;
+      if (output_files_.count(other.option) > 0 || folder_writes_.count(other.option) > 0 ||
+          !std::filesystem::is_regular_file(other.path, error)) {
+        continue;
+      }
+      const std::filesystem::path parent = other.path.has_parent_path() ? other.path.parent_path() : ".";
+      if (!std::filesystem::equivalent(parent, folder.path, error) || error) continue;
+      const std::string name = other.path.filename().string();
+      for (const std::string& pattern : writes->second) {
+        if (fnmatch(pattern.c_str(), name.c_str(), 0) == 0) {
+          throw InputError(display(other.option) + " " + other.path.string() + " is a file " + display(folder.option) +
+                           " " + folder.path.string() + " writes (" + pattern +
+                           "): writing it would destroy the input; give another folder");
+        }
+      }
+    }
+  }
   for (const Given& output : given) {
     if (output_files_.count(output.option) == 0) continue;
     std::error_code error;
@@ -479,7 +512,11 @@ void CommandLine::AddMultirate(int* physics_every, double* max_model_distance_m)
   multirate_physics_every_ = physics_every;
 }
 
-std::vector<std::string> NearMisses(const std::string& given, const std::vector<std::string>& known) {
+std::vector<std::string> NearMisses(const std::string& given, const std::vector<NearMissCandidate>& known) {
+  const auto lower = [](std::string text) {
+    for (char& c : text) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+    return text;
+  };
   const auto edit_distance = [](const std::string& a, const std::string& b) {
     std::vector<size_t> row(b.size() + 1);
     for (size_t j = 0; j <= b.size(); ++j) row[j] = j;
@@ -494,19 +531,38 @@ std::vector<std::string> NearMisses(const std::string& given, const std::vector<
     }
     return row[b.size()];
   };
+  // "--duration" for "--duration-s": a name is also matched without its unit.
+  const auto without_unit = [](const std::string& name) {
+    for (const char* unit : {"-pct", "-ms", "-s", "-m"}) {
+      const std::string suffix(unit);
+      if (name.size() > suffix.size() + 3 && name.compare(name.size() - suffix.size(), suffix.size(), suffix) == 0) {
+        return name.substr(0, name.size() - suffix.size());
+      }
+    }
+    return name;
+  };
+  // "--no-x" for "--x" (or back) means the opposite: never a hint (--no-overwrite -> --overwrite).
+  const auto opposite = [](const std::string& a, const std::string& b) {
+    return a == "--no-" + b.substr(std::min<size_t>(2, b.size())) || b == "--no-" + a.substr(std::min<size_t>(2, a.size()));
+  };
+  const std::string typed = lower(given);
+  if (typed.rfind("--", 0) != 0 || typed.size() < 3) return {};
   std::vector<std::string> beginning, closest;
-  size_t closest_distance = std::max<size_t>(1, given.size() / 4) + 1;
+  const size_t allowed = std::max<size_t>(1, typed.size() / 4);  // edits
+  size_t best = allowed + 1;
   // "--" alone or "--x" begins too many options to say anything useful.
-  const bool long_enough = given.rfind("--", 0) == 0 && given.size() >= 5;
-  for (const std::string& name : known) {
-    if (name == given || name.rfind("--", 0) != 0) continue;
-    if (long_enough && name.rfind(given, 0) == 0) beginning.push_back(name);
-    const size_t distance = edit_distance(given, name);
-    if (distance < closest_distance) {
-      closest_distance = distance;
-      closest = {name};
-    } else if (distance == closest_distance) {
-      closest.push_back(name);
+  const bool long_enough = typed.size() >= 5;
+  for (const NearMissCandidate& candidate : known) {
+    const std::string spelling = lower(candidate.spelling);
+    if (candidate.spelling == given || spelling.rfind("--", 0) != 0 || opposite(typed, spelling)) continue;
+    if (long_enough && spelling.rfind(typed, 0) == 0) beginning.push_back(candidate.suggestion);
+    const size_t distance = std::min(edit_distance(typed, spelling), edit_distance(typed, without_unit(spelling)));
+    if (distance > allowed) continue;
+    if (distance < best) {
+      best = distance;
+      closest = {candidate.suggestion};
+    } else if (distance == best) {
+      closest.push_back(candidate.suggestion);
     }
   }
   std::vector<std::string>& misses = beginning.empty() ? closest : beginning;
@@ -518,12 +574,13 @@ std::vector<std::string> NearMisses(const std::string& given, const std::vector<
 
 std::string CommandLine::UnknownOptionMessage(const std::string& argument) const {
   const std::string given = argument.substr(0, argument.find('='));
-  std::vector<std::string> known;
+  std::vector<NearMissCandidate> known;
   for (const CLI::Option* option : app_.get_options()) {
-    for (const std::string& name : option->get_lnames()) known.push_back("--" + name);
+    for (const std::string& name : option->get_lnames()) known.push_back({"--" + name, "--" + name});
   }
+  // An old spelling's typo is a miss of its current name (--recrod: --output).
   for (const auto& [old_name, current] : deprecated_) {
-    if (!current.empty()) known.push_back(current);  // never suggest an old spelling
+    if (!current.empty()) known.push_back({old_name, current});
   }
   const std::vector<std::string> misses = NearMisses(given, known);
   if (misses.empty()) return "unknown option " + given + " (see --help)";

@@ -114,6 +114,11 @@ class CommandLine {
   // (recorder --scene FILE -> FILE).
   void Deprecate(const std::string& old_name, const std::string& current_name);
 
+  // Declares the files an output folder option writes into its folder (glob patterns, e.g.
+  // "ticks-*.csv"): an input that is one of them is refused before any work (a loadtest
+  // replaying DIR/ticks-lt-1.csv with --csv-dir DIR overwrote its own trajectory).
+  void WritesInto(const CLI::Option* folder_option, std::vector<std::string> patterns);
+
   // Parses the arguments. Returns false when the run is over with exit code 0 (--help,
   // --version, --bash-completion printed on stdout). A bad command line throws InputError
   // with a message that names the option (RunMain prints it and exits 1).
@@ -130,7 +135,8 @@ class CommandLine {
   // An output file option: checked when read, and against the other files given.
   CLI::Option* AddOutputFileOption(const std::string& names, const std::string& flag, std::string* path,
                                    const std::string& help, const std::string& group);
-  // Throws InputError when an output file is also an input file or another output.
+  // Throws InputError when an output file is also an input file or another output, or when an
+  // input is a file an output folder's option writes (WritesInto).
   void CheckOutputsAreNotInputs() const;
   // "unknown option --x (see --help)", with the options it is a near miss of, if any.
   std::string UnknownOptionMessage(const std::string& argument) const;
@@ -142,12 +148,19 @@ class CommandLine {
   std::map<std::string, std::vector<std::string>> choices_;  // option name -> accepted values
   std::map<std::string, std::string> metavars_;              // option name -> FILE, DIR, N, ...
   std::set<const CLI::Option*> output_files_;                // options that name a file to write
+  std::map<const CLI::Option*, std::vector<std::string>> folder_writes_;  // WritesInto
 };
 
-// The long options among `known` that `given` is a near miss of ("--duration" for
-// "--duration-s", "--ouput" for "--output"): the ones it begins, else the closest by edit
-// distance if within a quarter of its length (at least 1). Empty when none is near; at most 3.
-std::vector<std::string> NearMisses(const std::string& given, const std::vector<std::string>& known);
+// An option spelling a typo may be near, and what to suggest for it (an old spelling's current name).
+struct NearMissCandidate {
+  std::string spelling, suggestion;
+};
+
+// What `given` (an unknown long option) is a near miss of, ignoring case: the suggestions of
+// the spellings it begins, else of the closest by edit distance (a spelling also counts without
+// its unit suffix: --durtion for --duration-s) if within a quarter of its length (at least 1
+// edit). Never a --no-x for --x or back (the opposite meaning). Empty when none is near; at most 3.
+std::vector<std::string> NearMisses(const std::string& given, const std::vector<NearMissCandidate>& known);
 
 // Word-wraps `text` to `width` columns, continuation lines indented by `indent` spaces;
 // explicit newlines in `text` are kept.

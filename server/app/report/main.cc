@@ -37,10 +37,11 @@ bool Parse(int argc, char** argv, Options* options) {
   command.AddCsv(&options->csv_path,
                  "steps as CSV, one row per step of every client (client_id column; units in the header; "
                  "contacts_missing = 1: the step's frame was lost, written from its force alone)");
-  command.AddOutputDirectory("--plots", &options->plots_dir, "DIR",
+  CLI::Option* plots = command.AddOutputDirectory("--plots", &options->plots_dir, "DIR",
                   "write force.png, contact_states.png, round_trip.png to DIR (needs /usr/bin/python3 with "
                   "matplotlib; implies a CSV at DIR/steps.csv unless --csv is given)",
                   hapco::cli::kGroupOutput);
+  command.WritesInto(plots, {"steps.csv", "*.png"});
   if (!command.Parse(argc, argv)) return false;
   if (options->path.empty()) throw hapco::InputError("missing RECORDING argument (see --help)");
   return true;

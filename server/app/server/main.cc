@@ -143,6 +143,15 @@ bool Parse(int argc, char** argv, Options* options) {
     for (std::string& path : ReadSceneList(scene_list)) options->scene_paths.push_back(std::move(path));
   }
   if (options->scene_paths.empty()) throw hapco::InputError("missing SCENE argument (see --help)");
+  // The command line checks its own outputs against its inputs; the scenes a --scenes list
+  // names are inputs too (--trace over one of them wrote the trace into the scene file).
+  for (const std::string& path : options->scene_paths) {
+    std::error_code error;
+    if (!options->trace_path.empty() && std::filesystem::equivalent(path, options->trace_path, error) && !error) {
+      throw hapco::InputError("--trace " + options->trace_path + " is also the scene " + path +
+                              ": writing it would destroy the scene; give another file");
+    }
+  }
   if (!hapco::service::IsValidClientId(options->server.server_id)) {
     throw hapco::InputError("--server-id expects 1-64 of [A-Za-z0-9_.-], got '" + options->server.server_id + "'");
   }

@@ -98,18 +98,20 @@ bool Parse(int argc, char** argv, Options* options) {
                     "write a HapCo recording: a header with the scene, one record per step with forces, contact "
                     "states and timings; read it with hapco-report");
   command.AddCsv(&options->csv_path, "one row per step (see the header line for columns and units)");
-  command.AddOutputDirectory("--vtk", &options->vtk_dir, "DIR",
+  CLI::Option* vtk = command.AddOutputDirectory("--vtk", &options->vtk_dir, "DIR",
                   "write ParaView files to DIR: deformed bodies and contact points every --vtk-every steps and at "
                   "the last step; open DIR/hapco.pvd",
                   hapco::cli::kGroupOutput);
   command.AddInteger("--vtk-every", &options->vtk_every, "N", "VTK output period in steps (default 10)",
                      hapco::cli::kGroupOutput, 1, 100000000);
-  command.AddOutputDirectory("--fclib", &options->fclib_dir, "DIR",
+  command.WritesInto(vtk, {"*.vtu", "hapco.pvd"});
+  CLI::Option* fclib = command.AddOutputDirectory("--fclib", &options->fclib_dir, "DIR",
                   "write the contact problem of every --fclib-every-th step with contacts, and of every step that "
                   "did not converge, as FCLIB files for other solvers: DIR/step_NNNNNN_local.hdf5 (W, q, mu) and "
                   "DIR/step_NNNNNN_global.hdf5 (M = both bodies' K_ff, H = contact Jacobian, f, w); solve them "
                   "with hapco-solve",
                   hapco::cli::kGroupOutput);
+  command.WritesInto(fclib, {"step_*_local.hdf5", "step_*_global.hdf5"});
   command.AddInteger("--fclib-every", &options->fclib_every, "N", "FCLIB export period in steps (default 10)",
                      hapco::cli::kGroupOutput, 1, 100000000);
   command.AddQuiet(&options->quiet, "no progress line");

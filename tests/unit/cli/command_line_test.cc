@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <filesystem>
 #include <string>
 #include <vector>
 
@@ -137,6 +138,36 @@ TEST(CommandLineTest, AnOutputThatIsAlsoAnInputOrAnotherOutputIsRefused) {
   std::remove(scene.c_str());
 }
 
+// An input among the files an output folder gets is refused (hapco-loadtest --trajectory
+// DIR/ticks-lt-1.csv --csv-dir DIR overwrote its trajectory; hapco-report DIR/steps.csv --plots DIR).
+TEST(CommandLineTest, AnInputAmongTheFilesAnOutputFolderWritesIsRefused) {
+  const std::string dir = ::testing::TempDir() + "/hapco_cli_folder";
+  std::filesystem::create_directories(dir);
+  const std::string input = dir + "/steps.csv";
+  std::FILE* file = std::fopen(input.c_str(), "w");
+  ASSERT_NE(file, nullptr);
+  std::fclose(file);
+  const auto error_of = [&](const std::vector<std::string>& arguments) -> std::string {
+    std::string scene, plots;
+    CommandLine command("hapco-toy", "SCENE [options]", "A toy tool.", "Exit code: 0.");
+    command.AddScene(&scene);
+    command.WritesInto(command.AddOutputDirectory("--plots", &plots, "DIR", "charts", "Output"), {"steps.csv", "*.png"});
+    try {
+      (void)command.Parse(arguments);
+    } catch (const InputError& error) {
+      return error.what();
+    }
+    return "";
+  };
+  EXPECT_EQ(error_of({input, "--plots", dir}), "SCENE " + input + " is a file --plots " + dir +
+                                                   " writes (steps.csv): writing it would destroy the input; give "
+                                                   "another folder");
+  EXPECT_EQ(error_of({input, "--plots", dir + "/charts"}), "") << "another folder";
+  // A short option's value after '=' is refused with the spelling meant ("-o=x.rec" wrote "=x.rec").
+  EXPECT_EQ(ErrorOf({"s", "-o=x.rec"}), "--output: the file name '=x.rec' starts with '=': write -o x.rec or --output=x.rec");
+  std::filesystem::remove_all(dir);
+}
+
 // A required output has no "leave the option out" (hapco-recorder --output "" said so).
 TEST(CommandLineTest, ARequiredOutputNeedsAFileName) {
   std::string output;
@@ -151,16 +182,32 @@ TEST(CommandLineTest, ARequiredOutputNeedsAFileName) {
 }
 
 TEST(CommandLineTest, NearMissesAreBeginningsOrWithinAQuarterOfTheLength) {
-  const std::vector<std::string> known = {"--max-iter", "--max-jump-m", "--mu", "--output", "--quiet", "-o"};
-  EXPECT_EQ(NearMisses("--max", known), (std::vector<std::string>{"--max-iter", "--max-jump-m"}));
-  EXPECT_EQ(NearMisses("--max-jump", known), (std::vector<std::string>{"--max-jump-m"}));
-  EXPECT_EQ(NearMisses("--outptu", known), (std::vector<std::string>{"--output"}));  // 2 edits in 9
-  EXPECT_EQ(NearMisses("--qiet", known), (std::vector<std::string>{"--quiet"}));
-  // Too short to begin anything usefully, but one edit from --mu.
-  EXPECT_EQ(NearMisses("--m", known), (std::vector<std::string>{"--mu"}));
-  EXPECT_TRUE(NearMisses("--bogus", known).empty());
-  EXPECT_TRUE(NearMisses("--output", known).empty()) << "a known option is no miss";
-  EXPECT_TRUE(NearMisses("--", {"--a1", "--a2", "--a3", "--a4"}).empty());
+  std::vector<NearMissCandidate> known;
+  for (const char* name : {"--max-iter", "--max-jump-m", "--mu", "--output", "--quiet", "-o", "--duration-s",
+                           "--version", "--overwrite", "--no-local-model", "--vtk"}) {
+    known.push_back({name, name});
+  }
+  known.push_back({"--record", "--output"});  // an old spelling
+  const auto misses = [&](const std::string& given) { return NearMisses(given, known); };
+  using Names = std::vector<std::string>;
+  EXPECT_EQ(misses("--max"), (Names{"--max-iter", "--max-jump-m"}));
+  EXPECT_EQ(misses("--max-jump"), (Names{"--max-jump-m"}));
+  EXPECT_EQ(misses("--outptu"), (Names{"--output"}));  // 2 edits in 9
+  EXPECT_EQ(misses("--qiet"), (Names{"--quiet"}));
+  EXPECT_EQ(misses("--QUIET"), (Names{"--quiet"})) << "case is ignored";
+  // Without its unit, --duration-s is one edit from --durtion (--version is three: no hint).
+  EXPECT_EQ(misses("--durtion"), (Names{"--duration-s"}));
+  EXPECT_EQ(misses("--recrod"), (Names{"--output"})) << "an old spelling's typo gets the current name";
+  EXPECT_TRUE(misses("--no-overwrite").empty()) << "the opposite is no hint";
+  EXPECT_TRUE(misses("--local-model").empty()) << "the opposite is no hint";
+  // A candidate exactly at the limit was suggested without being near (a helper saw
+  // "--to: did you mean --mu or --vtk?").
+  EXPECT_EQ(misses("--to"), Names{});  // 2 edits from --mu and --vtk
+  EXPECT_EQ(misses("--m"), (Names{"--mu"}));  // 1 edit
+  EXPECT_TRUE(misses("--bogus").empty());
+  EXPECT_TRUE(misses("--output").empty()) << "a known option is no miss";
+  EXPECT_TRUE(misses("-O").empty()) << "short options are not guessed";
+  EXPECT_TRUE(NearMisses("--", {{"--a1", "--a1"}, {"--a2", "--a2"}, {"--a3", "--a3"}, {"--a4", "--a4"}}).empty());
 }
 
 TEST(CommandLineTest, OutputPathsAndEmptyValuesAreCheckedBeforeAnyWork) {
