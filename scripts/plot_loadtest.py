@@ -6,7 +6,7 @@
       server force and the passivity energy of the first client)
   plot_loadtest.py capacity --csv CAPACITY.csv --runs-dir DIR --out PREFIX
       PREFIX-roundtrip.png (p50/p99/p99.9 vs N), PREFIX-missed.png (missed % vs N),
-      PREFIX-server.png (server step time and CPU vs N), PREFIX-cdf.png (round trip CDF per N,
+      PREFIX-server.png (server pose received to answered, queueing included, and CPU vs N), PREFIX-cdf.png (round trip CDF per N,
       from DIR/n<N>/roundtrip.csv)
   plot_loadtest.py table --capacity CAPACITY.csv | --network NETWORK.csv
       the markdown tables of docs/load-and-network.md, from the CSVs
@@ -149,10 +149,10 @@ def plot_capacity(args):
     for k, rs in by_server.items():
         n = [num(r, "clients") for r in rs]
         ax.plot(n, [num(r, "server_step_p50_us") for r in rs], "o" + styles.get(k, ":"), label="%s step p50" % k)
-        ax.plot(n, [num(r, "server_step_p99_us") for r in rs], "s" + styles.get(k, ":"), label="%s step p99" % k)
+        ax.plot(n, [num(r, "server_step_p99_us") for r in rs], "s" + styles.get(k, ":"), label="%s pose-to-answer p99" % k)
         ax2.plot(n, [num(r, "server_cpu") for r in rs], "k^" + styles.get(k, ":"), label="%s CPU (cores)" % k)
     ax.set_xlabel("clients N")
-    ax.set_ylabel("server step time, us")
+    ax.set_ylabel("server: pose received to answered (queueing included), us")
     ax.grid(True, alpha=0.3)
     ax2.set_ylabel("server CPU, cores")
     ax2.set_ylim(bottom=0)
@@ -253,7 +253,7 @@ def plot_network(args):
 
 def table(args):
     if args.capacity:
-        print("| server | N | lost | servo missed | round trip p50 / p99 / p99.9 | server step p50 / p99 | server CPU | timeouts | load before / after |")
+        print("| server | N | lost | servo missed | round trip p50 / p99 / p99.9 | server pose-to-answer p50 / p99 | server CPU | timeouts | load before / after |")
         print("|---|---|---|---|---|---|---|---|---|")
         for r in read_csv(args.capacity):
             print("| %s | %d | %.2f %% | %.2f %% | %.2f / %.2f / %.1f ms | %.0f / %.0f µs | %.2f | %d | %s / %s |" % (

@@ -40,7 +40,7 @@ constexpr const char* kDescription =
     R"(Runs N emulated PHANToM devices (one thread and one DDS participant each, client ids P-1..P-N) against a running hapco-server for S seconds each, at 1 kHz, and reports per client and in total: round trip (pose sampled -> force arrived) p50/p99/p99.9/max, missed servo ticks, poses never answered, stale-force ticks, force stability (tracking error against the server's force for the same pose, high-frequency ratio, passivity-observer energy) and the server's step times and CPU use (ServerStatus). Definitions: docs/load-and-network.md.)";
 
 constexpr const char* kFooter =
-    R"(Progress on stderr about once a second (unless --quiet): elapsed time, clients running, forces/s received, missed ticks in the last second, the server's sessions, step p99 and CPU (latest status).
+    R"(Progress on stderr about once a second (unless --quiet): elapsed time, clients running, forces/s received, missed ticks in the last second, the server's sessions, pose received to answered p99 (queueing included) and CPU (latest status).
 Exit code: 0 when it ran (also if it measured misses), 1 bad input, 2 no server found (no client connected), 3 DDS failure.)";
 
 struct Options {
@@ -484,7 +484,7 @@ int Run(const Options& o) {
       StatusSample latest;
       char server[160] = "server: no status yet";
       if (status.latest(&latest)) {
-        std::snprintf(server, sizeof(server), "server: %u sessions, step p99 %.0f us, cpu %.2f",
+        std::snprintf(server, sizeof(server), "server: %u sessions, pose-to-answer p99 %.0f us, cpu %.2f",
                       static_cast<unsigned>(latest.status.sessions), latest.status.step_time_p99_us,
                       latest.status.cpu_use);
       }
@@ -652,10 +652,22 @@ int Run(const Options& o) {
   }
   for (const auto& row : rows) PrintRow(row);
   PrintRow(all);
-  std::printf("server: step p50 %.0f us, p99 %.0f us (median over %d status periods), max %.0f us, CPU %.2f cores, "
-              "%u sessions at most, %llu poses superseded\n",
+  std::printf("server: pose received to answered (queueing included) p50 %.0f us, p99 %.0f us (median over %d status "
+              "periods), max %.0f us, CPU %.2f cores, %u sessions at most, %llu poses superseded\n",
               server.step_p50_us, server.step_p99_us, server.periods, server.step_max_us, server.cpu_use,
               server.sessions_max, static_cast<unsigned long long>(server.superseded));
+  // Where the unanswered poses went: an overloaded server loses more than it supersedes (a
+  // helper's 20 clients: 103 573 unanswered, 3 131 superseded), and "superseded" alone read as
+  // the whole loss.
+  if (all.stability.unanswered_poses > 0) {
+    const uint64_t superseded = std::min<uint64_t>(server.superseded, all.stability.unanswered_poses);
+    std::printf("unanswered poses %llu: %llu superseded by the server, %llu never taken by it (its reader keeps the "
+                "newest 16 poses of a client: a server more than 16 poses behind loses the older ones) or lost on "
+                "the way\n",
+                static_cast<unsigned long long>(all.stability.unanswered_poses),
+                static_cast<unsigned long long>(superseded),
+                static_cast<unsigned long long>(all.stability.unanswered_poses - superseded));
+  }
   std::printf("capacity check: missed ticks %.3f %%, lost end to end (missed + unanswered poses) %.3f %%; "
               "passivity %s (min E %.3g J, tolerance %.0e J)\n",
               MissedPct(all), LostPct(all), all.passivity_min_j < -kPassivityToleranceJ ? "VIOLATED" : "kept",
