@@ -522,7 +522,7 @@ void PhantomClient::Run(const std::atomic<bool>& stop, const std::function<void(
           last_stale_answer_log_s = now_s;
           char line[200];
           std::snprintf(line, sizeof(line),
-                        "t=%.3f s: answers to poses %.0f ms old arrive (%llu so far): not rendered "
+                        "t=%.3f s: answers to poses %.1f ms old arrive (%llu so far): not rendered "
                         "(--max-answer-age-ms %.0f)",
                         now_s, age_s * 1e3, static_cast<unsigned long long>(stats_.stale_answers),
                         config_.safety.max_answer_age_s * 1e3);
