@@ -39,13 +39,26 @@ sim::PoseVerdict CheckStatelessPose(const hapco_idl_DevicePose& pose, const sim:
 
 sim::PoseVerdict PoseStream::Check(const hapco_idl_DevicePose& pose, std::int64_t receive_ns,
                                    const sim::PoseLimits& limits, const hapco_idl_DevicePose* pending) {
-  if (!flood_.Take(receive_ns, limits.flood_burst, limits.max_poses_per_ms)) return sim::PoseVerdict::kFlood;
+  if (!flood_.Take(FloodClock(pose, receive_ns), limits.flood_burst, limits.max_poses_per_ms)) {
+    return sim::PoseVerdict::kFlood;
+  }
   if (!FiniteOrientation(pose)) return sim::PoseVerdict::kNonFinite;
   if (pending != nullptr) {
     return sim::CheckPose(PositionOf(pose), pose.sequence_number,
                           sim::AcceptedPose{pending->sequence_number, PositionOf(*pending)}, limits);
   }
   return sim::CheckPose(PositionOf(pose), pose.sequence_number, last_, limits);
+}
+
+std::int64_t PoseStream::FloodClock(const hapco_idl_DevicePose& pose, std::int64_t receive_ns) {
+  std::int64_t t = receive_ns;
+  if (pose.client_time_ns != 0) {
+    const std::int64_t offset = pose.client_time_ns - receive_ns;
+    if (!client_offset_ns_ || offset > *client_offset_ns_) client_offset_ns_ = offset;
+    t = pose.client_time_ns - *client_offset_ns_;  // <= receive_ns
+  }
+  flood_clock_ns_ = std::max(flood_clock_ns_, t);
+  return flood_clock_ns_;
 }
 
 std::uint64_t PoseStream::Accept(const hapco_idl_DevicePose& pose) {

@@ -47,8 +47,18 @@ class PoseStream {
   const std::optional<sim::AcceptedPose>& last() const { return last_; }
 
  private:
+  // The flood bucket's clock, ns: the client's own (client_time_ns) aligned to the server's by
+  // the largest client - server offset seen (the smallest delay), so never ahead of the
+  // server's; the server's receive time for a pose without a client time. A backlog the
+  // server's own stall releases (SIGSTOP 0.3-3 s: 134 "floods" of a 1 kHz phantom, a helper
+  // session) is 1 ms apart on the client's clock; a client sending faster than its clock says
+  // makes the offset grow, and the bucket then runs on the server's time.
+  std::int64_t FloodClock(const hapco_idl_DevicePose& pose, std::int64_t receive_ns);
+
   std::optional<sim::AcceptedPose> last_;
   TokenBucket flood_;  // every pose seen takes a token (sim::PoseLimits::flood_burst)
+  std::optional<std::int64_t> client_offset_ns_;  // max over poses of client_time_ns - receive_ns
+  std::int64_t flood_clock_ns_ = 0;               // the bucket's clock, never decreasing
 };
 
 // The poses of one client waiting for the next step batch (ServerLoop::StepQueued), in

@@ -117,6 +117,61 @@ TEST(PoseStream, ABurstAfterTheServersOwnStallIsNotAFloodButAFasterClientIs) {
   EXPECT_LE(accepted, static_cast<int>(200 * limits.max_poses_per_ms + limits.flood_burst) + 1);
 }
 
+// A server stopped for 0.8 s (SIGSTOP: a frozen host) gets, when it runs again, the poses a
+// 1 kHz client sent meanwhile in a rush (its receive thread releases the socket's backlog):
+// hundreds within a few ms of the server's clock, but 1 ms apart on the client's. That is no
+// flood (a helper session counted 134 "pose flood" refusals of a well-behaved phantom over such
+// stalls). A client whose clock runs faster than the server's gains nothing from it.
+TEST(PoseStream, TheBacklogOfTheServersOwnStallIsNoFloodOnTheClientsClock) {
+  sim::PoseLimits limits;
+  PoseStream stream;
+  std::uint64_t sequence = 0;
+  std::int64_t client_ns = 5'000'000'000, server_ns = 9'000'000'000;  // two clocks, any offset
+  const auto pose_at = [&](std::int64_t client_time_ns) {
+    hapco_idl_DevicePose pose = PoseWithRepeats(++sequence, 0);
+    pose.position_m = {0.010, 0, 0};
+    pose.client_time_ns = client_time_ns;
+    return pose;
+  };
+  for (int k = 0; k < 100; ++k) {  // steady 1 kHz, 0.2-0.7 ms on the way
+    client_ns += 1'000'000;
+    const hapco_idl_DevicePose pose = pose_at(client_ns);
+    ASSERT_EQ(stream.Check(pose, server_ns + client_ns - 5'000'000'000 + 200'000 + (k % 6) * 100'000, limits),
+              sim::PoseVerdict::kAccept);
+    stream.Accept(pose);
+  }
+  // 800 poses sent during the stall, taken 10 us apart once it ends.
+  std::int64_t taken_ns = server_ns + client_ns - 5'000'000'000 + 800'000'000;
+  int floods = 0;
+  for (int k = 0; k < 800; ++k) {
+    client_ns += 1'000'000;
+    taken_ns += 10'000;
+    const hapco_idl_DevicePose pose = pose_at(client_ns);
+    if (stream.Check(pose, taken_ns, limits) == sim::PoseVerdict::kFlood) ++floods;
+    stream.Accept(pose);
+  }
+  EXPECT_EQ(floods, 0);
+  // A client stamping 1 ms per pose but sending 100 per ms: its clock runs ahead of the
+  // server's, so the bucket runs on the server's and refuses it beyond the rate.
+  int accepted = 0;
+  for (int k = 0; k < 2000; ++k) {
+    client_ns += 1'000'000;
+    taken_ns += 10'000;
+    const hapco_idl_DevicePose pose = pose_at(client_ns);
+    const sim::PoseVerdict verdict = stream.Check(pose, taken_ns, limits);
+    if (verdict == sim::PoseVerdict::kFlood) {
+      ++floods;
+    } else {
+      ++accepted;
+      stream.Accept(pose);
+    }
+  }
+  EXPECT_GT(floods, 1500);
+  // 20 ms of server time, and the 8 ms by which the backlog's last pose still lagged the
+  // server's clock (taken 8 ms "late": that much of the client's clock is still behind it).
+  EXPECT_LE(accepted, static_cast<int>((20 + 8) * limits.max_poses_per_ms + limits.flood_burst) + 1);
+}
+
 // An overloaded server (deep contacts, several sessions: a helper session saw 20-40 ms per
 // loop) takes a full burst every loop, and a client's next pose can arrive while the loop is
 // still taking the other clients' poses, a fraction of a ms after its own burst. That is the
