@@ -123,6 +123,14 @@ struct PhantomClient::Dds {
 namespace {
 // A server whose status has not come for this long is not chosen (three default periods).
 constexpr int64_t kServerMaxAgeNs = 3'000'000'000LL;
+
+// True at most once a second per kind of log line (*last_s: when it was last true, < 0 never);
+// the lines carry their counts, so none is lost.
+bool LogDue(double* last_s, double now_s) {
+  if (*last_s >= 0 && now_s - *last_s < 1.0) return false;
+  *last_s = now_s;
+  return true;
+}
 }  // namespace
 
 PhantomClient::PhantomClient(ClientConfig config) : config_(std::move(config)) {
@@ -482,8 +490,7 @@ void PhantomClient::Run(const std::atomic<bool>& stop, const std::function<void(
         // but the user hears why, at most once a second.
         ++stats_.ignored_notices;
         stats_.server_ignored_poses = r.server_ignored_poses;
-        if (log && (last_notice_log_s < 0 || now_s - last_notice_log_s >= 1.0)) {
-          last_notice_log_s = now_s;
+        if (log && LogDue(&last_notice_log_s, now_s)) {
           char line[200];
           std::snprintf(line, sizeof(line), "t=%.3f s: the server ignores this device's poses: %s (%llu so far)", now_s,
                         ServerVerdictText(r.verdict), static_cast<unsigned long long>(r.server_ignored_poses));
@@ -497,8 +504,7 @@ void PhantomClient::Run(const std::atomic<bool>& stop, const std::function<void(
       // hovering 5 mm above the bar felt 5.8 N), and neither was told (a helper session).
       if (sent_time_ns[static_cast<std::size_t>(r.pose_sequence % kSentPoses)] != r.client_time_ns) {
         ++stats_.foreign_forces;
-        if (log && (last_foreign_log_s < 0 || now_s - last_foreign_log_s >= 1.0)) {
-          last_foreign_log_s = now_s;
+        if (log && LogDue(&last_foreign_log_s, now_s)) {
           char line[240];
           std::snprintf(line, sizeof(line),
                         "t=%.3f s: forces for poses this device never sent (%llu so far, not rendered): another "
@@ -518,8 +524,7 @@ void PhantomClient::Run(const std::atomic<bool>& stop, const std::function<void(
       if (age_s > config_.safety.max_answer_age_s) {
         ++stats_.stale_answers;
         stats_.oldest_stale_answer_s = std::max(stats_.oldest_stale_answer_s, age_s);
-        if (log && (last_stale_answer_log_s < 0 || now_s - last_stale_answer_log_s >= 1.0)) {
-          last_stale_answer_log_s = now_s;
+        if (log && LogDue(&last_stale_answer_log_s, now_s)) {
           char line[200];
           std::snprintf(line, sizeof(line),
                         "t=%.3f s: answers to poses %.1f ms old arrive (%llu so far): not rendered "

@@ -66,18 +66,56 @@ std::string WritePressTrajectory(const std::string& dir) {
   return path;
 }
 
+// The test's view of one client's poses and forces (both in the client's partition).
+struct ClientWatch {
+  ClientWatch(dds_domainid_t domain, const std::string& client_id)
+      : participant(domain),
+        pose_topic(participant),
+        force_topic(participant),
+        subscriber(participant, ClientPartition(client_id)),
+        poses(subscriber, pose_topic),
+        forces(subscriber, force_topic) {}
+  Participant participant;
+  Topic<hapco_idl_DevicePose> pose_topic;
+  Topic<hapco_idl_FeedbackForce> force_topic;
+  Subscriber subscriber;
+  Reader<hapco_idl_DevicePose> poses;
+  Reader<hapco_idl_FeedbackForce> forces;
+};
+
+// The sequence of the first force above 1 N after pose 100 (the server pushing back after the
+// press), or 0 if none came before `deadline`.
+uint64_t FirstPushingForce(Reader<hapco_idl_FeedbackForce>& force_reader, dds_time_t deadline) {
+  hapco_idl_FeedbackForce force{};
+  uint64_t sequence = 0;
+  while (sequence == 0 && dds_time() < deadline) {
+    if (!force_reader.WaitForData(DDS_MSECS(100))) continue;
+    while (force_reader.Take(&force)) {
+      const double norm = std::sqrt(force.force_n.x * force.force_n.x + force.force_n.y * force.force_n.y +
+                                    force.force_n.z * force.force_n.z);
+      if (force.pose_sequence >= 100 && norm > 1.0) sequence = force.pose_sequence;
+    }
+  }
+  return sequence;
+}
+
+// Waits until the phantom has published pose `sequence` (its own clock: one pose a tick).
+bool WaitForPose(Reader<hapco_idl_DevicePose>& pose_reader, uint64_t sequence, dds_time_t deadline) {
+  hapco_idl_DevicePose pose{};
+  bool reached = false;
+  while (!reached && dds_time() < deadline) {
+    if (!pose_reader.WaitForData(DDS_MSECS(100))) continue;
+    while (pose_reader.Take(&pose)) reached = reached || pose.sequence_number >= sequence;
+  }
+  return reached;
+}
+
 TEST(ServerFailover, ClientRampsToZeroWhenTheServerDiesAndResumesWhenOneReturns) {
   const std::string dir = TestDir();
   const dds_domainid_t domain = SetUpTestDomain();
   const std::string trajectory = WritePressTrajectory(dir);
 
-  // The test watches the client's poses and forces (both in the client's partition).
-  Participant participant(domain);
-  Topic<hapco_idl_DevicePose> pose_topic(participant);
-  Topic<hapco_idl_FeedbackForce> force_topic(participant);
-  Subscriber client_subscriber(participant, ClientPartition("phantom-1"));
-  Reader<hapco_idl_DevicePose> pose_reader(client_subscriber, pose_topic);
-  Reader<hapco_idl_FeedbackForce> force_reader(client_subscriber, force_topic);
+  ClientWatch watch(domain, "phantom-1");
 
   auto first_server = std::make_unique<Process>(
       std::vector<std::string>{HAPCO_SERVER_EXE, kScene, "--domain", std::to_string(domain)}, dir + "/server1.out",
@@ -88,31 +126,15 @@ TEST(ServerFailover, ClientRampsToZeroWhenTheServerDiesAndResumesWhenOneReturns)
                   dir + "/phantom.out", dir + "/phantom.err");
 
   // Kill the server while it is pushing back (a force above 1 N, after the press).
-  hapco_idl_FeedbackForce force{};
-  uint64_t killed_after_sequence = 0;
   const dds_time_t deadline = dds_time() + DDS_SECS(60);
-  while (killed_after_sequence == 0 && dds_time() < deadline) {
-    if (!force_reader.WaitForData(DDS_MSECS(100))) continue;
-    while (force_reader.Take(&force)) {
-      const double norm = std::sqrt(force.force_n.x * force.force_n.x + force.force_n.y * force.force_n.y +
-                                    force.force_n.z * force.force_n.z);
-      if (force.pose_sequence >= 100 && norm > 1.0) killed_after_sequence = force.pose_sequence;
-    }
-  }
+  const uint64_t killed_after_sequence = FirstPushingForce(watch.forces, deadline);
   ASSERT_GT(killed_after_sequence, 0u) << "no force above 1 N: " << ReadFile(dir + "/server1.err");
   first_server->Signal(SIGKILL);
   ASSERT_EQ(first_server->Wait(10'000), 128 + SIGKILL);
   first_server.reset();
 
   // Let the client's own clock pass timeout + ramp + margin (its poses carry its ticks).
-  hapco_idl_DevicePose pose{};
-  const uint64_t restart_at = killed_after_sequence + 200;
-  bool reached = false;
-  while (!reached && dds_time() < deadline) {
-    if (!pose_reader.WaitForData(DDS_MSECS(100))) continue;
-    while (pose_reader.Take(&pose)) reached = reached || pose.sequence_number >= restart_at;
-  }
-  ASSERT_TRUE(reached) << "the phantom stopped publishing";
+  ASSERT_TRUE(WaitForPose(watch.poses, killed_after_sequence + 200, deadline)) << "the phantom stopped publishing";
   Process second_server({HAPCO_SERVER_EXE, kScene, "--domain", std::to_string(domain)}, dir + "/server2.out",
                         dir + "/server2.err");
   ASSERT_EQ(phantom.Wait(60'000), 0) << ReadFile(dir + "/phantom.err");
@@ -195,12 +217,7 @@ TEST(ServerFailover, AnswersToPosesLongPastAreNotRenderedAfterAServerStall) {
   const std::string dir = TestDir();
   const dds_domainid_t domain = SetUpTestDomain();
   const std::string trajectory = WritePressTrajectory(dir);
-  Participant participant(domain);
-  Topic<hapco_idl_DevicePose> pose_topic(participant);
-  Topic<hapco_idl_FeedbackForce> force_topic(participant);
-  Subscriber client_subscriber(participant, ClientPartition("phantom-1"));
-  Reader<hapco_idl_DevicePose> pose_reader(client_subscriber, pose_topic);
-  Reader<hapco_idl_FeedbackForce> force_reader(client_subscriber, force_topic);
+  ClientWatch watch(domain, "phantom-1");
   Process server({HAPCO_SERVER_EXE, kScene, "--domain", std::to_string(domain)}, dir + "/server.out",
                  dir + "/server.err");
   Process phantom({HAPCO_PHANTOM_EXE, kScene, "--client-id", "phantom-1", "--domain", std::to_string(domain),
@@ -208,25 +225,11 @@ TEST(ServerFailover, AnswersToPosesLongPastAreNotRenderedAfterAServerStall) {
                    "--connect-timeout-s", "60"},
                   dir + "/phantom.out", dir + "/phantom.err");
   // Stall the server while it pushes back, for 800 of the client's ticks (its poses count them).
-  hapco_idl_FeedbackForce force{};
-  uint64_t stalled_after = 0;
   const dds_time_t deadline = dds_time() + DDS_SECS(60);
-  while (stalled_after == 0 && dds_time() < deadline) {
-    if (!force_reader.WaitForData(DDS_MSECS(100))) continue;
-    while (force_reader.Take(&force)) {
-      const double norm = std::sqrt(force.force_n.x * force.force_n.x + force.force_n.y * force.force_n.y +
-                                    force.force_n.z * force.force_n.z);
-      if (force.pose_sequence >= 100 && norm > 1.0) stalled_after = force.pose_sequence;
-    }
-  }
+  const uint64_t stalled_after = FirstPushingForce(watch.forces, deadline);
   ASSERT_GT(stalled_after, 0u) << "no force above 1 N: " << ReadFile(dir + "/server.err");
   server.Signal(SIGSTOP);
-  hapco_idl_DevicePose pose{};
-  bool reached = false;
-  while (!reached && dds_time() < deadline) {
-    if (!pose_reader.WaitForData(DDS_MSECS(100))) continue;
-    while (pose_reader.Take(&pose)) reached = reached || pose.sequence_number >= stalled_after + 800;
-  }
+  const bool reached = WaitForPose(watch.poses, stalled_after + 800, deadline);
   server.Signal(SIGCONT);
   ASSERT_TRUE(reached) << "the phantom stopped publishing";
   ASSERT_EQ(phantom.Wait(60'000), 0) << ReadFile(dir + "/phantom.err");
