@@ -10,13 +10,12 @@
 
 #include <algorithm>
 #include <atomic>
-#include <filesystem>
-#include <functional>
 #include <chrono>
 #include <cstdint>
 #include <cstdio>
 #include <cstring>
 #include <deque>
+#include <filesystem>
 #include <fstream>
 #include <iterator>
 #include <map>
@@ -386,6 +385,14 @@ hapco::recording::Header MakeHeader(const Options& o) {
   return header;
 }
 
+// Removes the --ready-file marker at `path` if it is one (an empty regular file), never data.
+void RemoveReadyMarker(const std::string& path) {
+  std::error_code error;
+  if (!path.empty() && std::filesystem::is_regular_file(path, error) && std::filesystem::file_size(path, error) == 0) {
+    std::filesystem::remove(path, error);
+  }
+}
+
 int Run(const Options& o) {
   hapco::StopSignals stop_signals;
 
@@ -393,12 +400,6 @@ int Run(const Options& o) {
   // health check before this one is (a helper session), so a stale one goes first, even when
   // the recording below is refused. It is an empty marker: a file with data at that path is
   // someone's (a recording given as --ready-file was deleted), so it is refused, not removed.
-  const auto remove_marker = [](const std::string& path) {
-    std::error_code error;
-    if (!path.empty() && std::filesystem::is_regular_file(path, error) && std::filesystem::file_size(path, error) == 0) {
-      std::filesystem::remove(path, error);
-    }
-  };
   if (!o.ready_file.empty()) {
     std::error_code error;
     if (std::filesystem::exists(o.ready_file, error) &&
@@ -407,13 +408,12 @@ int Run(const Options& o) {
                               " exists and is not an empty marker file: give a path of its own (it is created "
                               "when the recorder is ready and removed when it stops)");
     }
-    remove_marker(o.ready_file);
+    RemoveReadyMarker(o.ready_file);
   }
   struct ReadyFileRemover {
     const std::string& path;
-    std::function<void(const std::string&)> remove;
-    ~ReadyFileRemover() { remove(path); }
-  } ready_file_remover{o.ready_file, remove_marker};
+    ~ReadyFileRemover() { RemoveReadyMarker(path); }
+  } ready_file_remover{o.ready_file};
 
   // The header goes first, before any DDS traffic: a recorder killed at any time leaves a
   // file with its header. An unwritable path throws InputError (exit 1).
