@@ -52,7 +52,8 @@ sim::PoseVerdict PoseStream::Check(const hapco_idl_DevicePose& pose, std::int64_
 
 std::int64_t PoseStream::FloodClock(const hapco_idl_DevicePose& pose, std::int64_t receive_ns) {
   std::int64_t t = receive_ns;
-  if (pose.client_time_ns != 0) {
+  // (A monotonic clock is positive: anything else is no client time, and would overflow below.)
+  if (pose.client_time_ns > 0 && receive_ns >= 0) {
     const std::int64_t offset = pose.client_time_ns - receive_ns;
     if (!client_offset_ns_ || offset > *client_offset_ns_) client_offset_ns_ = offset;
     t = pose.client_time_ns - *client_offset_ns_;  // <= receive_ns
