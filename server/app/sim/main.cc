@@ -390,8 +390,13 @@ int Run(const Options& options) {
   };
   const int steps = options.steps > 0 ? std::min(options.steps, trajectory_steps) : trajectory_steps;
   {
+    // Among the poses the workspace check lets through (a 1e308 row, or a file in millimetres,
+    // made it say "raise contact.reach_m to at least inf m" for poses then ignored anyway).
     double farthest_m = 0.0;
-    for (int step = 1; step <= steps; ++step) farthest_m = std::max(farthest_m, translation_at(step).norm());
+    for (int step = 1; step <= steps; ++step) {
+      const double distance_m = translation_at(step).norm();
+      if (std::isfinite(distance_m) && distance_m <= options.limits.workspace_m) farthest_m = std::max(farthest_m, distance_m);
+    }
     const std::string note = hapco::sim::ReachNote(model, farthest_m, "the trajectory's farthest pose");
     if (!note.empty()) std::printf("note: %s\n", note.c_str());
   }
