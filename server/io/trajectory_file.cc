@@ -27,6 +27,8 @@ std::vector<std::string> SplitCsv(const std::string& line) {
 
 bool ParseNumber(const std::string& text, double* value) {
   if (text.empty()) return false;
+  // Decimal only: strtod also reads "0x10" as 16 (a helper's file had a hex row, read silently).
+  if (text.find_first_not_of("0123456789+-.eE") != std::string::npos) return false;
   char* end = nullptr;
   *value = std::strtod(text.c_str(), &end);
   return end == text.c_str() + text.size();
@@ -47,6 +49,8 @@ TrajectoryFile ReadTrajectoryCsv(std::istream& in, const std::string& path, cons
   points.push_back(Eigen::Vector3d::Zero());
   std::array<int, 3> columns{0, 1, 2};
   int client_column = -1, sequence_column = -1, missing_column = -1, server_column = -1, step_column = -1;
+  std::size_t header_fields = 0;  // fields of the header (or of the first row without one)
+  bool has_header = false;
   file.session_starts.push_back(false);
   std::string last_server;
   std::uint64_t last_sequence = 0, last_step = 0;
@@ -85,6 +89,18 @@ TrajectoryFile ReadTrajectoryCsv(std::istream& in, const std::string& path, cons
                            ": the header names both x_m,y_m,z_m and dx_m,dy_m,dz_m: keep the one that holds the "
                            "device's translation");
         }
+        // A name twice: which column holds it is a guess (the first was taken, silently).
+        for (std::size_t i = 0; i < fields.size(); ++i) {
+          for (std::size_t j = i + 1; j < fields.size(); ++j) {
+            if (!fields[i].empty() && fields[i] == fields[j]) {
+              throw InputError(path + ":" + std::to_string(number) + ": the header names '" + fields[i] +
+                               "' twice (columns " + std::to_string(i + 1) + " and " + std::to_string(j + 1) +
+                               "): keep one");
+            }
+          }
+        }
+        header_fields = fields.size();
+        has_header = true;
         client_column = Find(fields, "client_id");
         sequence_column = Find(fields, "sequence");
         if (sequence_column < 0) sequence_column = Find(fields, "pose_sequence");
@@ -95,6 +111,14 @@ TrajectoryFile ReadTrajectoryCsv(std::istream& in, const std::string& path, cons
         if (sequence_column >= 0) file.sequences.push_back(0);
         continue;
       }
+    }
+    // A row longer than the header (or than the first row of a file without one) has a field
+    // too many somewhere: which column is which is then a guess (it was read silently).
+    if (header_fields == 0) header_fields = fields.size();
+    if (fields.size() > header_fields) {
+      throw InputError(path + ":" + std::to_string(number) + ": " + std::to_string(fields.size()) + " fields, " +
+                       (has_header ? "the header has " : "the first row has ") +
+                       std::to_string(header_fields) + ": a field too many (a comma as decimal separator?)");
     }
     const auto field = [&](int column) -> std::string {
       return column >= 0 && column < static_cast<int>(fields.size()) ? fields[static_cast<std::size_t>(column)] : "";

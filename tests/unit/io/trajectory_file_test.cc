@@ -66,6 +66,16 @@ TEST(TrajectoryFileTest, BadFilesNameTheLineAndTheFix) {
             std::string::npos);
   EXPECT_NE(ErrorOf(Write("short", "x_m,y_m,z_m\n0,0\n")).find(":2:"), std::string::npos);
   EXPECT_NE(ErrorOf(Write("empty", "x_m,y_m,z_m\n")).find("no trajectory rows"), std::string::npos);
+  // Read silently before (a helper session): a hex number, a field too many, a column named twice.
+  EXPECT_NE(ErrorOf(Write("hex", "x_m,y_m,z_m\n0,0,0\n0x10,0,0\n")).find(":3: expected a finite number in column 1"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf(Write("ragged", "x_m,y_m,z_m\n0,0,0\n0,0,0,5\n")).find(":3: 4 fields, the header has 3"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf(Write("ragged_bare", "0,0,0\n0,0,-1e-4,1\n")).find(":2: 4 fields, the first row has 3"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf(Write("dup", "dx_m,dx_m,dy_m,dz_m\n0,1,0,0\n")).find(":1: the header names 'dx_m' twice (columns 1 and 2)"),
+            std::string::npos);
+  EXPECT_EQ(ErrorOf(Write("decimal", "x_m,y_m,z_m\n0,-1.5e-4,+2E-4\n")), "") << "decimal forms are fine";
 }
 
 TEST(TrajectoryFileTest, SteppedPoseFilesGiveTheirSequencesAndSkipForceOnlyRows) {
