@@ -392,6 +392,8 @@ void PhantomClient::Run(const std::atomic<bool>& stop, const std::function<void(
   double last_notice_log_s = -1;  // when the last "server ignores poses" line was logged
   double last_foreign_log_s = -1;  // when the last "forces for poses never sent" line was logged
   double last_stale_answer_log_s = -1;  // when the last "answers to poses ... old" line was logged
+  double last_waiting_log_s = -1;       // when the last "still no force" line was logged
+  double stale_since_s = 0;             // when the current force timeout began
   // Send time of the last kSentPoses poses by sequence % kSentPoses (8 s at 1 kHz: an answer
   // later than that is stale anyway); 0 = none sent (MonotonicNowNs is never 0 after boot).
   std::vector<int64_t> sent_time_ns(kSentPoses, 0);
@@ -556,6 +558,8 @@ void PhantomClient::Run(const std::atomic<bool>& stop, const std::function<void(
     stats_.peak_rendered_n = std::max(stats_.peak_rendered_n, rendered.norm());
     const bool stale = safety.stale();
     if (stale && !was_stale) {
+      stale_since_s = now_s;
+      last_waiting_log_s = now_s;  // the first "still no force" line a second from now
       ++stats_.server_losses;
       if (log) {
         char line[160];
@@ -571,6 +575,14 @@ void PhantomClient::Run(const std::atomic<bool>& stop, const std::function<void(
                       static_cast<unsigned long long>(last_force_sequence));
         log(line);
       }
+    }
+    // A restarted server takes seconds to prepare its scene and be found: the device said nothing
+    // for 4-7 s between "ramping the force to zero" and "moving ..." (a helper session).
+    if (stale && log && LogDue(&last_waiting_log_s, now_s)) {
+      char line[160];
+      std::snprintf(line, sizeof(line), "t=%.3f s: still no force after %.0f s: waiting for a server%s", now_s,
+                    now_s - stale_since_s, config_.server_id.empty() ? " serving the scene (any will do)" : "");
+      log(line);
     }
     was_stale = stale;
     // Its server stopped answering: move to another one that serves the scene, if any (tried
