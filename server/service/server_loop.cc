@@ -474,7 +474,6 @@ void ServerLoop::StepQueued() {
         continue;
       }
       client.step_ns[slot] = client.session->StepAndPublish(client.stepped.pose(k), client.stepped.receive_ns(k));
-      client.sent_force_n[slot] = client.session->last_force_n();
     }
   };
   auto job = [&](int k) { step(*stepping_[static_cast<std::size_t>(k)]); };

@@ -130,7 +130,6 @@ class ServerLoop {
     PendingPoses stepped;
     int superseded_while_approaching = 0;  // queued poses left out of this batch (StepQueued)
     std::array<int64_t, kMaxQueuedPoses> step_ns{};
-    std::array<Eigen::Vector3d, kMaxQueuedPoses> sent_force_n{};
   };
 
   void ProcessSessionControls();
