@@ -207,6 +207,11 @@ int Run(const Options& o) {
     std::printf("  %llu answers to poses older than %.0f ms (the oldest %.0f ms: after an outage?) not rendered\n",
                 static_cast<unsigned long long>(s.stale_answers), o.max_answer_age_ms, s.oldest_stale_answer_s * 1e3);
   }
+  if (s.other_device_notices > 0) {
+    std::printf("  %llu notices that the server serves another device under the client id '%s' (the one that joined "
+                "last): give each device its own --client-id\n",
+                static_cast<unsigned long long>(s.other_device_notices), o.client_id.c_str());
+  }
   if (s.foreign_forces > 0) {
     std::printf("  %llu forces for poses this device never sent, not rendered: another device uses the client id "
                 "'%s'? Give each device its own --client-id\n",

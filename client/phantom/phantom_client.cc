@@ -28,6 +28,7 @@ ServerVerdict FromIdl(hapco_idl_PoseVerdict verdict) {
     case hapco_idl_POSE_IGNORED_NOT_FINITE: return ServerVerdict::kNotFinite;
     case hapco_idl_POSE_IGNORED_OUT_OF_WORKSPACE: return ServerVerdict::kOutOfWorkspace;
     case hapco_idl_POSE_IGNORED_JUMP: return ServerVerdict::kJump;
+    case hapco_idl_POSE_IGNORED_OTHER_DEVICE: return ServerVerdict::kOtherDevice;
   }
   return ServerVerdict::kNotFinite;  // an unknown value: not a force to render
 }
@@ -40,6 +41,9 @@ const char* ServerVerdictText(ServerVerdict verdict) {
     case ServerVerdict::kNotFinite: return "NaN or Inf in the pose";
     case ServerVerdict::kOutOfWorkspace: return "position outside the server's workspace (--workspace-m)";
     case ServerVerdict::kJump: return "position jump above the server's limit (--max-jump-m)";
+    case ServerVerdict::kOtherDevice:
+      return "its session of this client id serves another device (the one that joined last): give each device its "
+             "own --client-id";
   }
   return "unknown";
 }
@@ -487,6 +491,26 @@ void PhantomClient::Run(const std::atomic<bool>& stop, const std::function<void(
          tail != arrivals_head_.load(std::memory_order_acquire); ++tail) {
       const ReceivedForce r = arrivals_[tail % kArrivalCapacity];
       arrivals_tail_.store(tail + 1, std::memory_order_release);
+      // An answer to a pose this device sent carries that pose's sequence and send time. Two
+      // devices started with the same --client-id each rendered the other's forces (one
+      // hovering 5 mm above the bar felt 5.8 N), and neither was told (a helper session). A
+      // notice about another device's pose is not this device's either (it was told of the
+      // other's position jumps).
+      const bool own = sent_time_ns[static_cast<std::size_t>(r.pose_sequence % kSentPoses)] == r.client_time_ns;
+      if (!own && r.verdict != ServerVerdict::kStepped) continue;
+      if (r.verdict == ServerVerdict::kOtherDevice) {
+        // Its poses are not stepped at all: no force comes, and the safety filter ramps to zero.
+        ++stats_.other_device_notices;
+        if (log && LogDue(&last_notice_log_s, now_s)) {
+          char line[320];
+          std::snprintf(line, sizeof(line),
+                        "t=%.3f s: the server serves another device under the client id '%s' (the one that joined "
+                        "last): no forces for this one; give each device its own --client-id",
+                        now_s, config_.client_id.c_str());
+          log(line);
+        }
+        continue;
+      }
       if (r.verdict != ServerVerdict::kStepped) {
         // The server ignored a pose: no new force (the safety filter's timeout still applies),
         // but the user hears why, at most once a second.
@@ -500,11 +524,7 @@ void PhantomClient::Run(const std::atomic<bool>& stop, const std::function<void(
         }
         continue;
       }
-      stats_.server_ignored_poses = r.server_ignored_poses;
-      // An answer to a pose this device sent carries that pose's sequence and send time. Two
-      // devices started with the same --client-id each rendered the other's forces (one
-      // hovering 5 mm above the bar felt 5.8 N), and neither was told (a helper session).
-      if (sent_time_ns[static_cast<std::size_t>(r.pose_sequence % kSentPoses)] != r.client_time_ns) {
+      if (!own) {
         ++stats_.foreign_forces;
         if (log && LogDue(&last_foreign_log_s, now_s)) {
           char line[240];
@@ -579,9 +599,14 @@ void PhantomClient::Run(const std::atomic<bool>& stop, const std::function<void(
     // A restarted server takes seconds to prepare its scene and be found: the device said nothing
     // for 4-7 s between "ramping the force to zero" and "moving ..." (a helper session).
     if (stale && log && LogDue(&last_waiting_log_s, now_s)) {
-      char line[160];
+      char line[240];
+      // (A server that serves another device under this id is not waited for: it is told.)
       std::snprintf(line, sizeof(line), "t=%.3f s: still no force after %.0f s: waiting for a server%s", now_s,
-                    now_s - stale_since_s, config_.server_id.empty() ? " serving the scene (any will do)" : "");
+                    now_s - stale_since_s,
+                    stats_.other_device_notices > 0 ? " that serves this device (the one found serves another under "
+                                                      "this client id)"
+                    : config_.server_id.empty()     ? " serving the scene (any will do)"
+                                                    : "");
       log(line);
     }
     was_stale = stale;

@@ -55,7 +55,7 @@ struct ClientConfig {
 };
 
 // Why the server did not step a pose (FeedbackForce.pose_verdict): kStepped for a force.
-enum class ServerVerdict { kStepped, kNotFinite, kOutOfWorkspace, kJump };
+enum class ServerVerdict { kStepped, kNotFinite, kOutOfWorkspace, kJump, kOtherDevice };
 // "position jump above the server's limit" and the like, for a user.
 const char* ServerVerdictText(ServerVerdict verdict);
 
@@ -104,6 +104,9 @@ struct ClientStats {
   // Answers to poses this device never sent (sequence and send time match none of its own):
   // another device under the same client id. Logged, never rendered.
   uint64_t foreign_forces = 0;
+  // Notices that the server serves another device under this client id (the one that joined
+  // last): this device gets no forces from that server. Logged, counted.
+  uint64_t other_device_notices = 0;
   // Answers older than SafetyParameters::max_answer_age_s when they arrived: not rendered.
   uint64_t stale_answers = 0;
   double oldest_stale_answer_s = 0;  // the oldest of them, s

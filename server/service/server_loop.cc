@@ -220,7 +220,8 @@ namespace {
 // The client a writer may speak for: X of its only partition "hapco/client/X" ("" if it has
 // none or several; nullopt if the writer is not known, e.g. already gone).
 // DDS-Security's permissions let client X write only there.
-std::optional<std::string> WriterClientId(dds_entity_t reader, dds_instance_handle_t writer) {
+std::optional<std::pair<std::string, std::array<unsigned char, 16>>> WriterIdentityOf(dds_entity_t reader,
+                                                                                      dds_instance_handle_t writer) {
   dds_builtintopic_endpoint_t* endpoint = dds_get_matched_publication_data(reader, writer);
   if (endpoint == nullptr) return std::nullopt;
   std::string id;
@@ -234,30 +235,44 @@ std::optional<std::string> WriterClientId(dds_entity_t reader, dds_instance_hand
     for (uint32_t k = 0; k < count; ++k) dds_free(names[k]);
     dds_free(names);
   }
+  std::array<unsigned char, 16> device{};
+  static_assert(sizeof(endpoint->participant_key.v) == 16, "a DDS GUID is 16 bytes");
+  std::memcpy(device.data(), endpoint->participant_key.v, device.size());
   dds_builtintopic_free_endpoint(endpoint);
-  return id;
+  return std::make_pair(std::move(id), device);
 }
 
 }  // namespace
 
-bool ServerLoop::FromItsOwnWriter(const std::string& client_id, dds_entity_t reader, dds_instance_handle_t writer) {
-  auto known = writer_client_ids_.find(writer);
-  if (known == writer_client_ids_.end()) {
-    std::optional<std::string> writer_id = WriterClientId(reader, writer);
-    if (!writer_id) {
+bool ServerLoop::FromItsOwnWriter(const std::string& client_id, dds_entity_t reader, dds_instance_handle_t writer,
+                                  DeviceId* device) {
+  auto known = writer_identities_.find(writer);
+  if (known == writer_identities_.end()) {
+    auto identity = WriterIdentityOf(reader, writer);
+    if (!identity) {
       ++counters_.input.identity_mismatches;
       Log(kLogIdentity, "sample claiming client '" + client_id + "' from an unknown writer ignored");
       return false;
     }
-    if (writer_client_ids_.size() >= 4096) writer_client_ids_.clear();  // bounded; rebuilt on demand
-    known = writer_client_ids_.emplace(writer, std::move(*writer_id)).first;
+    if (writer_identities_.size() >= 4096) writer_identities_.clear();  // bounded; rebuilt on demand
+    known = writer_identities_.emplace(writer, WriterIdentity{std::move(identity->first), identity->second}).first;
   }
-  if (known->second == client_id) return true;
+  *device = known->second.device;
+  if (known->second.client_id == client_id) return true;
   ++counters_.input.identity_mismatches;
   Log(kLogIdentity, "sample claiming client '" + client_id + "' from the writer of " +
-                        (known->second.empty() ? std::string("no client partition") : "client '" + known->second + "'") +
+                        (known->second.client_id.empty() ? std::string("no client partition")
+                                                         : "client '" + known->second.client_id + "'") +
                         " ignored");
   return false;
+}
+
+void ServerLoop::RefuseOtherDevice(Client* client, const hapco_idl_DevicePose& pose, int64_t receive_ns) {
+  ++counters_.other_device_messages;
+  Log(kLogClient, "poses of a second device under the client id '" + client->session->client_id() +
+                      "' ignored: its session serves the device that joined last (give each device its own "
+                      "--client-id)");
+  client->session->NotifyOtherDevice(pose, receive_ns);
 }
 
 void ServerLoop::ProcessSessionControls() {
@@ -271,15 +286,25 @@ void ServerLoop::ProcessSessionControls() {
       Log(kLogClient, "session control with an invalid client id ignored");
       continue;
     }
-    if (!FromItsOwnWriter(id, session_reader_.handle(), info.publication_handle)) continue;
+    DeviceId device{};
+    if (!FromItsOwnWriter(id, session_reader_.handle(), info.publication_handle, &device)) continue;
     auto it = sessions_.find(id);
     if (!AddressedToMe(control.server_id)) {
       // For another server. A JOIN there means the client moved: its session here ends (it
       // never gets two servers' forces; server_choice.h).
-      if (control.command == hapco_idl_SESSION_JOIN && it != sessions_.end()) {
+      // (Its own device only: a second device under the id joining elsewhere ends nothing here.)
+      if (control.command == hapco_idl_SESSION_JOIN && it != sessions_.end() && it->second.device == device) {
         ++counters_.sessions_moved_away;
         CloseSession(it, "it joined server '" + ServerIdOf(control.server_id) + "'");
       }
+      continue;
+    }
+    const bool other_device = it != sessions_.end() && it->second.device != device;
+    if (other_device && control.command != hapco_idl_SESSION_JOIN) {
+      // A LEAVE or RESET of a device this session does not serve (the first of two devices
+      // with one id to exit closed the other's session).
+      ++counters_.other_device_messages;
+      Log(kLogClient, "session message of a second device under the client id '" + id + "' ignored");
       continue;
     }
     if (it != sessions_.end()) it->second.last_heard_ns = MonotonicNowNs();
@@ -300,7 +325,20 @@ void ServerLoop::ProcessSessionControls() {
           it = sessions_.end();
         }
         if (it == sessions_.end()) {
-          if (Client* opened = OpenSession(id, *model)) opened->joined_client_time_ns = control.client_time_ns;
+          if (Client* opened = OpenSession(id, *model)) {
+            opened->joined_client_time_ns = control.client_time_ns;
+            opened->device = device;
+          }
+        } else if (other_device) {
+          // Another device under this id: a restarted client (a new process), or a second
+          // device started with the same --client-id. The device that joined last is served,
+          // from the reference configuration; the other is told (RefuseOtherDevice).
+          RestartStream(&it->second);
+          it->second.device = device;
+          it->second.joined_client_time_ns = control.client_time_ns;
+          ++counters_.sessions_taken_over;
+          Log(kLogSession, "session of '" + id + "' taken over by another device (a restarted client, or two "
+                                                 "devices with one --client-id): reset");
         } else if (it->second.first_client_time_ns < 0) {
           // No pose yet: a client asking again while it waits for its session (it repeats its
           // JOIN every second): nothing to reset.
@@ -373,14 +411,15 @@ void ServerLoop::ProcessPoses() {
       Log(kLogClient, "pose with an invalid client id ignored");
       continue;
     }
-    if (!FromItsOwnWriter(id, pose_reader_.handle(), info.publication_handle)) continue;
+    DeviceId device{};
+    if (!FromItsOwnWriter(id, pose_reader_.handle(), info.publication_handle, &device)) continue;
     auto it = sessions_.find(id);
     if (!AddressedToMe(pose.server_id)) {
       ++counters_.poses_for_other_servers;  // another server's client: not bad input
       // It moved (its JOIN elsewhere may not have reached this server): never answer twice. Only
       // a pose sent after this session began says so: one of the stream before (addressed to
       // the server it left, still in flight or in the reader's queue) must not end it.
-      if (it != sessions_.end() && pose.server_id[0] != '\0' &&
+      if (it != sessions_.end() && it->second.device == device && pose.server_id[0] != '\0' &&
           pose.client_time_ns > std::max(it->second.joined_client_time_ns, it->second.first_client_time_ns)) {
         ++counters_.sessions_moved_away;
         CloseSession(it, "it is served by '" + ServerIdOf(pose.server_id) + "' now");
@@ -400,8 +439,13 @@ void ServerLoop::ProcessPoses() {
       }
       client = OpenSession(id, *models_.front());
       if (client == nullptr) continue;
+      client->device = device;
     } else {
       client = &it->second;
+      if (client->device != device) {
+        RefuseOtherDevice(client, pose, receive_ns);
+        continue;
+      }
     }
     client->last_heard_ns = receive_ns;
     if (!client->session->open() && !client->session->TryOpen(recorder_probe_.MatchedReaders(), receive_ns)) {
@@ -644,6 +688,11 @@ std::string ServerLoop::Summary() const {
                 static_cast<unsigned long long>(c.poses_for_other_servers),
                 static_cast<unsigned long long>(c.sessions_moved_away));
   std::string summary = line;
+  if (c.other_device_messages > 0 || c.sessions_taken_over > 0) {
+    summary += "; messages of second devices under a served client id ignored " +
+               std::to_string(c.other_device_messages) + ", sessions taken over by another device " +
+               std::to_string(c.sessions_taken_over);
+  }
   if (c.idle_sessions_closed > 0) {
     summary += "; sessions closed after --session-idle-s without a message " + std::to_string(c.idle_sessions_closed);
   }

@@ -85,6 +85,11 @@ struct ServerCounters {
   uint64_t poses_for_other_servers = 0;  // addressed to another server (or unaddressed, not ours)
   uint64_t sessions_moved_away = 0;  // closed because the client joined another server
   uint64_t idle_sessions_closed = 0;  // closed after ServerOptions::session_idle_s without a message
+  // A session serves one device (DDS participant): poses and session messages of another
+  // device under the same client id are ignored (that device is told), and a JOIN from
+  // another device takes the session over (a restarted client; ServerLoop::Client::device).
+  uint64_t other_device_messages = 0;
+  uint64_t sessions_taken_over = 0;
 };
 
 class ServerLoop {
@@ -112,8 +117,21 @@ class ServerLoop {
 
  private:
   static constexpr int kMaxQueuedPoses = PendingPoses::kCapacity;
+  // The device behind a sample: the GUID of its writer's DDS participant (one per client
+  // process: a restarted client is a new one).
+  using DeviceId = std::array<unsigned char, 16>;
+  struct WriterIdentity {
+    std::string client_id;  // of its partition, "" for none
+    DeviceId device{};
+  };
   struct Client {
     std::unique_ptr<Session> session;
+    // The device this session serves: the one whose JOIN or first pose opened it, or whose
+    // JOIN took it over. Two devices started with one --client-id shared a session: each
+    // device's poses moved the other's tool (7 mm jumps each way) and one device rendered the
+    // other's press (5.3 N hovering 5 mm above the bar, CI 2026-12-07); and the first to
+    // exit closed the other's session with its LEAVE.
+    DeviceId device{};
     PendingPoses queued;  // stepped in order by StepQueued (service/pose_intake.h)
     // Newest sequence number this client's session has processed, stepped or refused: repeats
     // (DevicePose.recent) at or before it are never looked at again.
@@ -159,7 +177,12 @@ class ServerLoop {
   // True when `client_id` is the client the writer of a sample may speak for (the id of its
   // partition), else counted as an identity mismatch and logged. One discovery lookup per
   // writer, then a hash lookup per sample.
-  bool FromItsOwnWriter(const std::string& client_id, dds_entity_t reader, dds_instance_handle_t writer);
+  // `device` receives the writer's device.
+  bool FromItsOwnWriter(const std::string& client_id, dds_entity_t reader, dds_instance_handle_t writer,
+                        DeviceId* device);
+  // A pose of a device that is not the one `client` serves: counted, logged, and that device
+  // told (a notice, POSE_IGNORED_OTHER_DEVICE).
+  void RefuseOtherDevice(Client* client, const hapco_idl_DevicePose& pose, int64_t receive_ns);
   void Log(int kind, const std::string& message);
 
   std::vector<const sim::TwoBodyModel*> models_;
@@ -197,7 +220,7 @@ class ServerLoop {
   // models, so it drains before they go.
   BackgroundDeleter retired_sessions_;
   std::set<std::string> left_clients_;  // sent SESSION_LEAVE and not joined since
-  std::unordered_map<dds_instance_handle_t, std::string> writer_client_ids_;  // writer -> its client
+  std::unordered_map<dds_instance_handle_t, WriterIdentity> writer_identities_;  // writer -> its client and device
   std::atomic<bool> stop_{false};
   ServerCounters counters_;
   // Counters of sessions closed so far (live sessions are added on demand).

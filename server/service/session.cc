@@ -212,6 +212,29 @@ void Session::NotifyIgnored(const hapco_idl_DevicePose& pose, int64_t receive_ns
   }
 }
 
+void Session::NotifyOtherDevice(const hapco_idl_DevicePose& pose, int64_t receive_ns) {
+  if (any_other_device_notice_ && receive_ns - last_other_device_notice_ns_ < kNoticePeriodNs) return;
+  any_other_device_notice_ = true;
+  last_other_device_notice_ns_ = receive_ns;
+  hapco_idl_FeedbackForce notice = force_;
+  SetClientId(notice.client_id, client_id_);
+  notice.force_n = ToIdl(Eigen::Vector3d::Zero());  // the served device's force is not this device's
+  notice.pose_sequence = pose.sequence_number;
+  notice.client_time_ns = pose.client_time_ns;
+  notice.server_receive_ns = receive_ns;
+  notice.pose_verdict = hapco_idl_POSE_IGNORED_OTHER_DEVICE;
+  notice.model = hapco_idl_LocalContactModel{};
+  notice.recent_count = 0;
+  notice.separating_count = notice.sticking_count = notice.sliding_count = 0;
+  notice.server_send_ns = MonotonicNowNs();
+  if (!open()) return;
+  if (force_writer_->Write(notice) == DDS_RETCODE_OK) {
+    ++counters_.ignored_notices;
+  } else {
+    ++counters_.force_write_errors;
+  }
+}
+
 void Session::FillLocalModel(bool force_is_from_this_step, bool linearized) {
   hapco_idl_LocalContactModel& m = force_.model;
   m = hapco_idl_LocalContactModel{};

@@ -106,6 +106,10 @@ class Session {
   // notice costs at most 10 samples/s however fast the client sends bad poses.
   void NotifyIgnored(const hapco_idl_DevicePose& pose, int64_t receive_ns, PoseVerdict verdict);
   static constexpr int64_t kNoticePeriodNs = 100'000'000;
+  // Tells a device that this session serves another device under the same client id
+  // (ServerLoop::Client::device): a notice answering its pose, POSE_IGNORED_OTHER_DEVICE, with
+  // a zero force (never the served device's force), at most one per kNoticePeriodNs.
+  void NotifyOtherDevice(const hapco_idl_DevicePose& pose, int64_t receive_ns);
 
   // SESSION_RESET (and a repeated SESSION_JOIN: a restarted client): reference
   // configuration, the stream restarts (any next sequence and position accepted).
@@ -157,6 +161,8 @@ class Session {
   std::FILE* trace_ = nullptr;
   bool any_notice_ = false;   // an ignored-pose notice was sent (since start or reset)
   int64_t last_notice_ns_ = 0;  // its receive time, server clock
+  bool any_other_device_notice_ = false;  // the same for NotifyOtherDevice
+  int64_t last_other_device_notice_ns_ = 0;
   SessionCounters counters_;
 };
 
