@@ -27,6 +27,7 @@
 
 #include "service/config.h"
 #include "service/dds.h"
+#include "test_domain.h"
 
 extern char** environ;
 
@@ -125,7 +126,7 @@ inline std::string TestDir() {
 inline dds_domainid_t SetUpTestDomain() {
   UseLoopbackConfig();  // children inherit CYCLONEDDS_URI
   const ::testing::TestInfo* info = ::testing::UnitTest::GetInstance()->current_test_info();
-  return DomainIdForName(std::string(info->test_suite_name()) + "." + info->name());
+  return ReserveTestDomain(std::string(info->test_suite_name()) + "." + info->name());  // test_domain.h
 }
 
 // Waits (inotify, bounded) until `done()` holds; `done` is checked after every change of

@@ -83,7 +83,7 @@ double MinRoundTripUs(const std::string& path) {
 
 TEST(LoadTestNetwork, DelayShowsInTheRoundTripAndTheSafetyRampEngagesWhenTheLinkIsCut) {
   const std::string dir = TestDir();
-  const std::string domain = std::to_string(DomainIdForName("LoadTestNetwork"));
+  const std::string domain = std::to_string(ReserveTestDomain("LoadTestNetwork"));
   const std::string server = std::string(HAPCO_SERVER_EXE) + " " + kScene + " --domain " + domain +
                              " --rt-priority 80 --quiet";
 
@@ -172,7 +172,7 @@ TEST(LoadTestNetwork, TheBestModeStaysPassiveAtARoundTripWhereDirectRenderingIsN
                     "--out", intent},
                    dir + "/intent.out", dir + "/intent.err");
   ASSERT_EQ(generate.Wait(30'000), 0) << ReadFile(dir + "/intent.err");
-  const std::string domain = std::to_string(DomainIdForName("LoadTestNetworkHaptics"));
+  const std::string domain = std::to_string(ReserveTestDomain("LoadTestNetworkHaptics"));
   const std::string scene = std::string(HAPCO_SOURCE_DIR) + "/proto/scenes/benchmark1.txtpb";
   const std::string server = std::string(HAPCO_SERVER_EXE) + " " + scene + " --domain " + domain + " --quiet";
   auto run = [&](const char* render, const char* out) {

@@ -16,6 +16,7 @@
 
 #include "service/config.h"
 #include "service/dds.h"
+#include "../test_domain.h"
 
 namespace hapco::service::testing {
 
@@ -23,12 +24,12 @@ namespace hapco::service::testing {
 inline constexpr dds_duration_t kDiscoveryTimeoutNs = DDS_SECS(10);
 inline constexpr dds_duration_t kDataTimeoutNs = DDS_SECS(10);
 
-// Each test gets its own domain (from its full name) and the loopback config. Must run
+// Each test gets its own domain (from its full name, reserved: ../test_domain.h) and the loopback config. Must run
 // before the first participant of the process exists (ctest runs one test per process).
 inline dds_domainid_t SetUpTestDomain() {
   UseLoopbackConfig();
   const ::testing::TestInfo* info = ::testing::UnitTest::GetInstance()->current_test_info();
-  return DomainIdForName(std::string(info->test_suite_name()) + "." + info->name());
+  return ReserveTestDomain(std::string(info->test_suite_name()) + "." + info->name());  // ../test_domain.h
 }
 
 // A child process running `body` (its return value is the exit code). Fork before the parent
