@@ -127,9 +127,20 @@ bool ServerLoop::OpenWaitingSessions(int64_t now_ns) {
       recorders = recorder_probe_.MatchedReaders();
       counted = true;
     }
-    if (!client.session->TryOpen(recorders, now_ns)) waiting = true;
+    if (!TryOpenSession(&client, recorders, now_ns)) waiting = true;
   }
   return waiting;
+}
+
+bool ServerLoop::TryOpenSession(Client* client, uint32_t recorders, int64_t now_ns) {
+  if (!client->session->TryOpen(recorders, now_ns)) return false;
+  if (const uint32_t missing = client->session->recorders_missing_at_open(); missing > 0) {
+    Log(kLogSession, "session of '" + client->session->client_id() + "' opened without " + std::to_string(missing) +
+                         " of the " + std::to_string(recorders) +
+                         " recorders present (their readers did not match its writer within 2 s): its first steps may "
+                         "be missing from their recordings");
+  }
+  return true;
 }
 
 const sim::TwoBodyModel* ServerLoop::FindModel(const std::string& scene_name) const {
@@ -448,7 +459,7 @@ void ServerLoop::ProcessPoses() {
       }
     }
     client->last_heard_ns = receive_ns;
-    if (!client->session->open() && !client->session->TryOpen(recorder_probe_.MatchedReaders(), receive_ns)) {
+    if (!client->session->open() && !TryOpenSession(client, recorder_probe_.MatchedReaders(), receive_ns)) {
       ++counters_.poses_before_open;  // the session waits for its recorders (Session::TryOpen)
       continue;
     }

@@ -168,6 +168,8 @@ class ServerLoop {
   bool AddressedToMe(const char (&field)[65]) const;
   // Opens the sessions whose recorders are ready (Session::TryOpen); true if any still waits.
   bool OpenWaitingSessions(int64_t now_ns);
+  // Session::TryOpen, logging a session that opened without all its recorders.
+  bool TryOpenSession(Client* client, uint32_t recorders, int64_t now_ns);
   Client* OpenSession(const std::string& client_id, const sim::TwoBodyModel& model);
   // The served scene called `scene_name` (the first one for ""), nullptr if none.
   void CloseSession(std::map<std::string, Client>::iterator it, const std::string& why);  // counters kept, logged

@@ -63,7 +63,9 @@ Session::Session(std::string client_id, const sim::TwoBodyModel& model,
 
 bool Session::TryOpen(uint32_t recorders, int64_t now_ns) {
   if (open()) return true;
-  if (contact_writer_.MatchedReaders() < recorders && now_ns - created_ns_ < kRecorderWaitNs) return false;
+  const uint32_t matched = contact_writer_.MatchedReaders();
+  if (matched < recorders && now_ns - created_ns_ < kRecorderWaitNs) return false;
+  recorders_missing_at_open_ = matched < recorders ? recorders - matched : 0;
   force_writer_.emplace(publisher_, *force_topic_);
   return true;
 }

@@ -86,7 +86,12 @@ class Session {
   // are ready. Returns open().
   bool TryOpen(uint32_t recorders, int64_t now_ns);
   bool open() const { return force_writer_.has_value(); }
-  static constexpr int64_t kRecorderWaitNs = 500'000'000;
+  // 2 s: 0.5 s was not enough on a loaded host (compose on 2 cores, CI 2026-12-06: a session
+  // opened before the recorder had its writer, and its first steps were missing from the
+  // recording). It only delays a client while a recorder is present but does not match.
+  static constexpr int64_t kRecorderWaitNs = 2'000'000'000;
+  // Recorders the session opened without (kRecorderWaitNs ran out; 0 when all had matched).
+  uint32_t recorders_missing_at_open() const { return recorders_missing_at_open_; }
 
   // Classifies a pose against the limits and this session's stream (no state change except
   // the flood window, which counts every pose seen). receive_ns: server CLOCK_MONOTONIC.
@@ -152,6 +157,7 @@ class Session {
   const Topic<hapco_idl_FeedbackForce>* force_topic_;
   Writer<hapco_idl_ContactStateFrame> contact_writer_;
   std::optional<Writer<hapco_idl_FeedbackForce>> force_writer_;  // created by TryOpen
+  uint32_t recorders_missing_at_open_ = 0;
   SessionStageTimes stage_times_;
   int64_t created_ns_;
   SamplePtr<hapco_idl_ContactStateFrame> frame_;  // reserved once, reused every step
