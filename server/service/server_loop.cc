@@ -373,7 +373,7 @@ void ServerLoop::ProcessSessionControls() {
           // Poses of this client still in flight must not reopen the session: it has to
           // SESSION_JOIN again (a restarted server, which has no such record, still opens a
           // session on a client's first pose, so clients resume after a server restart).
-          left_clients_.insert(id);
+          left_clients_[id] = device;
         }
         break;
       case hapco_idl_SESSION_RESET:
@@ -439,7 +439,7 @@ void ServerLoop::ProcessPoses() {
     }
     Client* client = nullptr;
     if (it == sessions_.end()) {
-      if (left_clients_.count(id) != 0) {
+      if (auto left = left_clients_.find(id); left != left_clients_.end() && left->second == device) {
         ++counters_.poses_after_leave;
         continue;  // in flight when the client left; not bad input
       }
@@ -451,6 +451,7 @@ void ServerLoop::ProcessPoses() {
       client = OpenSession(id, *models_.front());
       if (client == nullptr) continue;
       client->device = device;
+      left_clients_.erase(id);  // (another device than the one that left)
     } else {
       client = &it->second;
       if (client->device != device) {

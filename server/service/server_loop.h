@@ -221,7 +221,10 @@ class ServerLoop {
   // Closed sessions are destroyed here, off the loop; declared after the participant and the
   // models, so it drains before they go.
   BackgroundDeleter retired_sessions_;
-  std::set<std::string> left_clients_;  // sent SESSION_LEAVE and not joined since
+  // Clients that sent SESSION_LEAVE and have not joined since, with the device that left: its
+  // poses still in flight must not reopen the session; another device's poses open one for it
+  // (a second device under the id was stranded when the served one left; a helper session).
+  std::map<std::string, DeviceId> left_clients_;
   std::unordered_map<dds_instance_handle_t, WriterIdentity> writer_identities_;  // writer -> its client and device
   std::atomic<bool> stop_{false};
   ServerCounters counters_;

@@ -97,6 +97,7 @@ int64_t Session::StepAndPublish(const hapco_idl_DevicePose& pose, int64_t receiv
   Eigen::Vector3d force_n = stepped ? out.device_force_n : answer.device_force_n;
   if (stepped) {
     ++counters_.steps;
+    ++stream_steps_;
     if (out.compliance_out_of_range) ++counters_.beyond_compliance_range;
   } else {
     ++counters_.model_answers;
@@ -278,7 +279,7 @@ void Session::AnchorModelAtAnswer(const Eigen::Vector3d& pose_m) {
 }
 
 void Session::FillContactFrame(uint64_t pose_sequence) {
-  frame_->step = counters_.steps;
+  frame_->step = stream_steps_;
   frame_->pose_sequence = pose_sequence;
   if (physics_ == SessionPhysics::kNone) {
     frame_->contacts._length = 0;
@@ -313,6 +314,10 @@ void Session::Reset() {
   last_good_force_n_.setZero();
   any_notice_ = false;
   force_.recent_count = 0;  // answers of the previous stream are not this one's
+  // The frames' step numbers start again: a recorder (and hapco-report) sees a new session,
+  // as for a re-opened one. A take-over by a restarted client used to read as one session
+  // whose force fell from 12.7 N at 2 mm to 0.6 N at 0.1 mm in one step (a helper session).
+  stream_steps_ = 0;
 }
 
 }  // namespace hapco::service

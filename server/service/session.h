@@ -170,6 +170,7 @@ class Session {
   bool any_other_device_notice_ = false;  // the same for NotifyOtherDevice
   int64_t last_other_device_notice_ns_ = 0;
   SessionCounters counters_;
+  uint64_t stream_steps_ = 0;  // steps since the session opened or was reset (ContactStateFrame.step)
 };
 
 }  // namespace hapco::service

@@ -180,6 +180,70 @@ TEST(ServerProcess, FreePathOffTheScriptedFootprintGetsTheOfflineForces) {
   EXPECT_GT(last.z(), 0.5) << "pressed 2 mm, 30 mm off the scripted footprint: " << last.transpose();
 }
 
+// The served device leaves (a normal exit: SESSION_LEAVE) while another device under its id
+// still runs: that device gets a session of its own (it was stranded: no force, no notice,
+// for the rest of its run; a helper session). A recorder sees three sessions of 'twin': the
+// first device's, the take-over's (its steps start again; it read as one session whose
+// force fell from 12.7 to 0.6 N in one step) and the first device's new one.
+TEST(ServerProcess, WhenTheServedDeviceLeavesTheOtherDeviceUnderItsIdIsServedAgain) {
+  const std::string dir = TestDir();
+  const std::string domain = std::to_string(SetUpTestDomain());
+  {
+    std::ofstream press(dir + "/press.csv"), hover(dir + "/hover.csv");
+    press << "x_m,y_m,z_m\n";
+    hover << "x_m,y_m,z_m\n";
+    for (int k = 1; k <= 20; ++k) press << 0 << "," << 0 << "," << -1e-4 * k << "\n";
+    for (int k = 0; k < 20; ++k) hover << 0 << "," << 0 << "," << 0.005 << "\n";
+  }
+  Process server({HAPCO_SERVER_EXE, kScene, "--domain", domain}, dir + "/server.out", dir + "/server.err");
+  Process recorder({HAPCO_RECORDER_EXE, kScene, "--output", dir + "/twin.hapcorec", "--domain", domain},
+                   dir + "/recorder.out", dir + "/recorder.err");
+  ASSERT_TRUE(WaitForText(dir + "/recorder.out", "ready", 60'000)) << ReadFile(dir + "/recorder.err");
+  {
+    Process presser({HAPCO_PHANTOM_EXE, kScene, "--client-id", "twin", "--domain", domain, "--trajectory",
+                     dir + "/press.csv", "--duration-s", "5", "--csv", dir + "/press_ticks.csv", "--connect-timeout-s",
+                     "60"},
+                    dir + "/presser.out", dir + "/presser.err");
+    ASSERT_TRUE(WaitForFile(dir + "/server.err", 60'000, [&] {
+      return ReadFile(dir + "/server.err").find("session opened for 'twin'") != std::string::npos;
+    })) << ReadFile(dir + "/server.err");
+    {
+      Process hoverer({HAPCO_PHANTOM_EXE, kScene, "--client-id", "twin", "--domain", domain, "--trajectory",
+                       dir + "/hover.csv", "--duration-s", "1", "--csv", dir + "/hover_ticks.csv",
+                       "--connect-timeout-s", "60"},
+                      dir + "/hoverer.out", dir + "/hoverer.err");
+      ASSERT_EQ(hoverer.Wait(120'000), 0) << ReadFile(dir + "/hoverer.err");
+    }
+    ASSERT_EQ(presser.Wait(120'000), 0) << ReadFile(dir + "/presser.err");
+  }
+  server.Signal(SIGTERM);
+  ASSERT_EQ(server.Wait(30'000), 0) << ReadFile(dir + "/server.err");
+  recorder.Signal(SIGTERM);
+  ASSERT_EQ(recorder.Wait(30'000), 0) << ReadFile(dir + "/recorder.err");
+  const std::string server_log = ReadFile(dir + "/server.err");
+  const std::string presser_err = ReadFile(dir + "/presser.err");
+  // The presser was told while the hoverer held the session, then served again to its end.
+  EXPECT_NE(presser_err.find("the server serves another device under the client id 'twin'"), std::string::npos)
+      << presser_err;
+  EXPECT_NE(presser_err.find("forces resumed"), std::string::npos) << presser_err;
+  const auto rows = ReadCsv(dir + "/press_ticks.csv");
+  ASSERT_GE(rows.size(), 100u);
+  const auto& last = rows.back();
+  EXPECT_EQ(last.at("stale"), "0") << presser_err;
+  EXPECT_GT(Vec(last, "fx_n", "fy_n", "fz_n").norm(), 4.0) << "its press, 2 mm into the bar: " << presser_err;
+  std::size_t opened = 0;
+  for (std::size_t at = server_log.find("session opened for 'twin'"); at != std::string::npos;
+       at = server_log.find("session opened for 'twin'", at + 1)) {
+    ++opened;
+  }
+  EXPECT_EQ(opened, 2u) << server_log;
+  // The recording: three sessions of 'twin', each from step 1.
+  Process report({HAPCO_REPORT_EXE, dir + "/twin.hapcorec"}, dir + "/report.out", dir + "/report.err");
+  ASSERT_EQ(report.Wait(60'000), 0) << ReadFile(dir + "/report.err");
+  const std::string report_out = ReadFile(dir + "/report.out");
+  EXPECT_NE(report_out.find("in 3 sessions (1.."), std::string::npos) << report_out;
+}
+
 // Two devices started with the same --client-id shared one session: each device's poses
 // moved the other's tool, each got the other's answers (a helper session's device hovering
 // 5 mm above the bar felt 5.8 N; after a fix that kept only a device's own answers, CI still
