@@ -177,6 +177,9 @@ class Recorder {
   }
 
   void OnFrame(const hapco_idl_ContactStateFrame& frame) {
+    // A session's hello frame (step 0, written when it is created: the server opens the
+    // session once its readers have acknowledged it, Session::TryOpen) is no step.
+    if (frame.step == 0) return;
     ClientState& c = StateOf(frame.client_id, frame.server_id);
     // A frame this recorder already has, delivered again: a contact-state writer is
     // transient-local (its newest frames go to every reader that matches it later), so a

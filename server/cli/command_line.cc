@@ -431,10 +431,12 @@ CLI::Option* CommandLine::AddConnectTimeout(double* seconds, const std::string& 
 }
 
 CLI::Option* CommandLine::AddForceTimeout(double* milliseconds) {
+  // At least one 1 kHz tick: 0.05 was taken and logged "no force for 0 ms" (a helper session).
   return AddNumber("--force-timeout-ms", milliseconds, "T",
-                   "no new force for T ms -> the rendered force ramps to zero in 20 ms (default 50); "
-                   "it resumes (rate limited) when forces return",
-                   "Device", 0, HUGE_VAL, true);
+                   "no new force for T ms -> the rendered force ramps to zero over max(20 ms, |F| / 250 N/s), "
+                   "31.6 ms from the 7.9 N clamp (default 50, at least 1: one tick); it resumes (rate limited) "
+                   "when forces return",
+                   "Device", 1, 1e6);
 }
 
 CLI::Option* CommandLine::AddMaxAnswerAge(double* milliseconds) {
@@ -492,7 +494,8 @@ CLI::Option* CommandLine::AddWorkspace(double* metres, const std::string& help) 
 }
 
 CLI::Option* CommandLine::AddMaxJump(double* metres, const std::string& help) {
-  return AddNumber("--max-jump-m", metres, "X", help, "Pose checks", 0, HUGE_VAL, true);
+  // At most 1 m per pose: "--max-jump-m 2", meant as 2 mm, passed silently (a helper session).
+  return AddNumber("--max-jump-m", metres, "X", help + " (in metres, at most 1)", "Pose checks", 0, 1.0, true);
 }
 
 void CommandLine::AddMultirate(int* physics_every, double* max_model_distance_m) {

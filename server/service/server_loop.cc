@@ -139,6 +139,10 @@ bool ServerLoop::TryOpenSession(Client* client, uint32_t recorders, int64_t now_
                          " of the " + std::to_string(recorders) +
                          " recorders present (their readers did not match its writer within 2 s): its first steps may "
                          "be missing from their recordings");
+  } else if (client->session->recorders_unconfirmed_at_open()) {
+    Log(kLogSession, "session of '" + client->session->client_id() +
+                         "' opened before its readers acknowledged its first frame (2 s): its first steps may be "
+                         "missing from their recordings");
   }
   return true;
 }

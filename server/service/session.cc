@@ -59,13 +59,26 @@ Session::Session(std::string client_id, const sim::TwoBodyModel& model,
       std::min<std::size_t>(model.tool_candidates().size() + model.obstacle_reverse_slaves().size(),
                             hapco_idl_MAX_CONTACT_SAMPLES));
   ReserveContacts(frame_.get(), capacity);
+  // A hello frame (step 0, no contacts, never recorded): TryOpen waits until the readers
+  // present have acknowledged it. A reader that has matched this writer on the server's side
+  // may not yet know the writer on its own, and drops what it sends meanwhile: with the
+  // recorder ready first, a session's step-1 frame was still lost in 3 of 40 sessions on a
+  // loaded host (a helper session). An acknowledged hello means the step-1 frame reaches it.
+  frame_->step = 0;
+  frame_->pose_sequence = 0;
+  frame_->contacts._length = 0;
+  frame_->server_receive_ns = frame_->server_send_ns = created_ns_;
+  contact_writer_.Write(*frame_);
 }
 
 bool Session::TryOpen(uint32_t recorders, int64_t now_ns) {
   if (open()) return true;
   const uint32_t matched = contact_writer_.MatchedReaders();
-  if (matched < recorders && now_ns - created_ns_ < kRecorderWaitNs) return false;
+  // (A zero timeout only looks: the hello frame acknowledged by every matched reader.)
+  const bool acknowledged = matched >= recorders && contact_writer_.WaitForAcks(0) == DDS_RETCODE_OK;
+  if (!acknowledged && now_ns - created_ns_ < kRecorderWaitNs) return false;
   recorders_missing_at_open_ = matched < recorders ? recorders - matched : 0;
+  recorders_unconfirmed_at_open_ = !acknowledged;
   force_writer_.emplace(publisher_, *force_topic_);
   return true;
 }

@@ -79,7 +79,8 @@ class Session {
   void set_trace(std::FILE* trace) { trace_ = trace; }
 
   // A session answers poses only once it is open: its force writer is created when its
-  // contact-state writer has matched `recorders` readers (the recorders present, so that no
+  // contact-state writer has matched `recorders` readers and they have acknowledged its hello
+  // frame (step 0, written at creation; a recorder ignores it) (the recorders present, so that no
   // step of the session is missing from their recordings: with DDS-Security a new writer
   // needs its keys exchanged, ~90 ms here) or kRecorderWaitNs after creation, whichever comes
   // first. The client's Connect waits for the force writer, so it starts when the recorders
@@ -90,8 +91,10 @@ class Session {
   // opened before the recorder had its writer, and its first steps were missing from the
   // recording). It only delays a client while a recorder is present but does not match.
   static constexpr int64_t kRecorderWaitNs = 2'000'000'000;
-  // Recorders the session opened without (kRecorderWaitNs ran out; 0 when all had matched).
+  // Recorders the session opened without (kRecorderWaitNs ran out; 0 when all had matched),
+  // and whether it opened before its readers had acknowledged its hello frame.
   uint32_t recorders_missing_at_open() const { return recorders_missing_at_open_; }
+  bool recorders_unconfirmed_at_open() const { return recorders_unconfirmed_at_open_; }
 
   // Classifies a pose against the limits and this session's stream (no state change except
   // the flood window, which counts every pose seen). receive_ns: server CLOCK_MONOTONIC.
@@ -158,6 +161,7 @@ class Session {
   Writer<hapco_idl_ContactStateFrame> contact_writer_;
   std::optional<Writer<hapco_idl_FeedbackForce>> force_writer_;  // created by TryOpen
   uint32_t recorders_missing_at_open_ = 0;
+  bool recorders_unconfirmed_at_open_ = false;
   SessionStageTimes stage_times_;
   int64_t created_ns_;
   SamplePtr<hapco_idl_ContactStateFrame> frame_;  // reserved once, reused every step
