@@ -2,6 +2,7 @@
 
 #include <fcntl.h>
 #include <sys/file.h>
+#include <sys/mman.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -121,25 +122,17 @@ std::string RecordingReadReport::Summary() const {
   return text;
 }
 
-std::vector<recording::Record> ReadRecording(const std::string& path, RecordingReadReport* report) {
-  std::string data;
-  {
-    std::unique_ptr<std::FILE, int (*)(std::FILE*)> file(std::fopen(path.c_str(), "rb"), &std::fclose);
-    if (!file) throw InputError("cannot open recording " + path);
-    char chunk[1 << 16];
-    std::size_t got = 0;
-    while ((got = std::fread(chunk, 1, sizeof(chunk), file.get())) > 0) data.append(chunk, got);
-  }
-  return ParseRecording(data, path, report);
-}
+namespace {
 
-std::vector<recording::Record> ParseRecording(std::string_view data, const std::string& path,
-                                              RecordingReadReport* report) {
+// The parse loop of ParseRecording and VisitRecording: every complete, checksum-valid record
+// goes to `visit` (`record` is reused), damage is skipped by resyncing on the record magic.
+void ParseRecords(std::string_view data, const std::string& path, RecordingReadReport* report,
+                  const std::function<void(const recording::Record&)>& visit) {
   if (data.size() < sizeof(kFileMagic) || std::memcmp(data.data(), kFileMagic, sizeof(kFileMagic)) != 0) {
     throw InputError(path + " is not a HapCo recording (missing the HAPCOREC magic)");
   }
   RecordingReadReport local;
-  std::vector<recording::Record> records;
+  recording::Record record;
   std::size_t at = sizeof(kFileMagic);
   // Resync: look for the next record magic after damage.
   auto next_magic = [&](std::size_t from) {
@@ -180,7 +173,7 @@ std::vector<recording::Record> ParseRecording(std::string_view data, const std::
       continue;
     }
     const char* payload = data.data() + at + kFrameBytes;
-    recording::Record record;
+    record.Clear();
     if (Crc32(payload, length) != crc || !record.ParseFromArray(payload, static_cast<int>(length))) {
       const std::size_t next = next_magic(at + 1);
       ++local.damaged_records;
@@ -188,11 +181,63 @@ std::vector<recording::Record> ParseRecording(std::string_view data, const std::
       at = next;
       continue;
     }
-    records.push_back(std::move(record));
+    ++local.records;
+    visit(record);
     at += kFrameBytes + length;
   }
-  local.records = static_cast<std::int64_t>(records.size());
   if (report != nullptr) *report = local;
+}
+
+}  // namespace
+
+void VisitRecording(const std::string& path, RecordingReadReport* report,
+                    const std::function<void(const recording::Record&)>& visit) {
+  const int fd = open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) throw InputError("cannot open recording " + path);
+  struct stat st {};
+  if (fstat(fd, &st) != 0 || S_ISDIR(st.st_mode)) {
+    close(fd);
+    throw InputError("cannot read recording " + path + ": it is a directory");
+  }
+  if (!S_ISREG(st.st_mode)) {
+    // A pipe or a device (hapco-report /dev/stdin < FILE): read into memory, as before.
+    std::string data;
+    char chunk[1 << 16];
+    ssize_t got = 0;
+    while ((got = read(fd, chunk, sizeof(chunk))) > 0) data.append(chunk, static_cast<std::size_t>(got));
+    close(fd);
+    ParseRecords(data, path, report, visit);
+    return;
+  }
+  const auto size = static_cast<std::size_t>(st.st_size);
+  if (size == 0) {
+    close(fd);
+    ParseRecords(std::string_view(), path, report, visit);  // throws: no magic
+    return;
+  }
+  void* map = mmap(nullptr, size, PROT_READ, MAP_PRIVATE, fd, 0);
+  close(fd);  // the mapping stays valid
+  if (map == MAP_FAILED) throw InputError("cannot map recording " + path + ": " + std::strerror(errno));
+  madvise(map, size, MADV_SEQUENTIAL);
+  try {
+    ParseRecords(std::string_view(static_cast<const char*>(map), size), path, report, visit);
+  } catch (...) {
+    munmap(map, size);
+    throw;
+  }
+  munmap(map, size);
+}
+
+std::vector<recording::Record> ReadRecording(const std::string& path, RecordingReadReport* report) {
+  std::vector<recording::Record> records;
+  VisitRecording(path, report, [&records](const recording::Record& record) { records.push_back(record); });
+  return records;
+}
+
+std::vector<recording::Record> ParseRecording(std::string_view data, const std::string& path,
+                                              RecordingReadReport* report) {
+  std::vector<recording::Record> records;
+  ParseRecords(data, path, report, [&records](const recording::Record& record) { records.push_back(record); });
   return records;
 }
 

@@ -1,9 +1,10 @@
 // hapco-report: turns a HapCo recording into a summary, CSV and charts. Thin: reading is
-// hapco::io::ReadRecording, charts are scripts/plot_recording.py (matplotlib).
+// hapco::io::VisitRecording (one record at a time), charts are scripts/plot_recording.py (matplotlib).
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <deque>
 #include <map>
 #include <string>
 #include <vector>
@@ -49,38 +50,44 @@ bool Parse(int argc, char** argv, Options* options) {
 
 std::string Quote(const std::string& text) { return "'" + text + "'"; }
 
+// What the summary and the CSV need of a step; its contacts are not kept (hapco-report held
+// every record of a recording at once: ~4.5x the file, a helper session). Strings interned.
+struct StepRow {
+  uint64_t step = 0, pose_sequence = 0;
+  int64_t time_ns = 0;
+  int client = 0, server = 0, solver_status = 0;
+  double dx = 0, dy = 0, dz = 0, fx = 0, fy = 0, fz = 0, device_fx = 0, device_fy = 0, device_fz = 0;
+  uint32_t separating = 0, sticking = 0, sliding = 0, iterations = 0;
+  double solve_s = 0, step_s = 0, round_trip_s = 0, server_time_s = 0;
+  bool contacts_missing = false;
+  int contacts = 0;
+};
+
+class Interned {
+ public:
+  int Of(const std::string& text) {
+    auto [it, inserted] = index_.try_emplace(text, static_cast<int>(texts_.size()));
+    if (inserted) texts_.push_back(text);
+    return it->second;
+  }
+  const std::string& operator[](int i) const { return texts_[static_cast<std::size_t>(i)]; }
+
+ private:
+  std::map<std::string, int> index_;
+  std::vector<std::string> texts_;
+};
+
 int Run(const Options& options) {
   const std::string& path = options.path;
   std::string csv_path = options.csv_path;
   const std::string& plots_dir = options.plots_dir;
   hapco::io::RecordingReadReport report;
-  const auto records = hapco::io::ReadRecording(path, &report);
-  std::printf("recording  %s: %s\n", path.c_str(), report.Summary().c_str());
-  if (records.empty()) {
-    // Not even the header survived (a file cut right after it was created): nothing to report.
-    throw hapco::InputError(path + " holds no complete record (" + report.Summary() +
-                            "): the file was cut before its first record ended");
-  }
-  std::vector<const hapco::recording::Step*> steps;
+  std::vector<StepRow> steps;
+  std::deque<hapco::recording::ServerStatus> status_records;  // few (one a second per server)
   std::vector<const hapco::recording::ServerStatus*> statuses;
-  bool have_header = false;
-  for (const auto& record : records) {
-    if (record.has_header()) {
-      const auto& header = record.header();
-      have_header = true;
-      std::printf("header     written by %s (HapCo %s), scene %s, solver %s\n", header.writer().c_str(),
-                  header.hapco_version().c_str(), header.scene_name().empty() ? "(none)" : header.scene_name().c_str(),
-                  header.solver().empty() ? "(none)" : header.solver().c_str());
-    } else if (record.has_step()) {
-      steps.push_back(&record.step());
-    } else if (record.has_status()) {
-      statuses.push_back(&record.status());
-    }
-  }
-  if (!have_header) std::printf("header     missing\n");
-  double peak_force_n = 0, peak_device_n = 0;
-  long not_converged = 0, contacts[3] = {0, 0, 0};
-  std::vector<double> step_times, server_times, round_trips;
+  std::vector<std::string> header_lines;
+  bool have_header = false, offline = false;
+  Interned texts;
   // Per client, in order of appearance: its sessions (io/recording_sessions.h), steps, steps
   // without contacts.
   struct ClientSummary {
@@ -89,24 +96,81 @@ int Run(const Options& options) {
   };
   std::vector<std::string> client_order;
   std::map<std::string, ClientSummary> clients;
-  for (const auto* step : steps) {
-    auto [it, inserted] = clients.try_emplace(step->client_id());
-    ClientSummary& c = it->second;
-    if (inserted) client_order.push_back(step->client_id());
-    c.sessions.Add(*step);
+  hapco::io::VisitRecording(path, &report, [&](const hapco::recording::Record& record) {
+    if (record.has_header()) {
+      const auto& header = record.header();
+      have_header = true;
+      // Online recordings (hapco-recorder) carry the server's time per step but not the solve
+      // and step timings of an offline run: the CSV leaves those cells empty, not 0.
+      if (header.writer() == "hapco-sim") offline = true;
+      char line[512];
+      std::snprintf(line, sizeof line, "header     written by %s (HapCo %s), scene %s, solver %s\n",
+                    header.writer().c_str(), header.hapco_version().c_str(),
+                    header.scene_name().empty() ? "(none)" : header.scene_name().c_str(),
+                    header.solver().empty() ? "(none)" : header.solver().c_str());
+      header_lines.emplace_back(line);
+    } else if (record.has_step()) {
+      const auto& step = record.step();
+      auto [it, inserted] = clients.try_emplace(step.client_id());
+      if (inserted) client_order.push_back(step.client_id());
+      it->second.sessions.Add(step);
+      StepRow row;
+      row.step = step.step();
+      row.pose_sequence = step.pose_sequence();
+      row.time_ns = step.time_ns();
+      row.client = texts.Of(step.client_id());
+      row.server = texts.Of(step.server_id());
+      row.solver_status = texts.Of(step.solver_status());
+      row.dx = step.device_translation_m().x();
+      row.dy = step.device_translation_m().y();
+      row.dz = step.device_translation_m().z();
+      row.fx = step.contact_force_n().x();
+      row.fy = step.contact_force_n().y();
+      row.fz = step.contact_force_n().z();
+      row.device_fx = step.device_force_n().x();
+      row.device_fy = step.device_force_n().y();
+      row.device_fz = step.device_force_n().z();
+      row.separating = step.separating();
+      row.sticking = step.sticking();
+      row.sliding = step.sliding();
+      row.iterations = step.iterations();
+      row.solve_s = step.solve_s();
+      row.step_s = step.step_s();
+      row.round_trip_s = step.round_trip_s();
+      row.server_time_s = step.server_time_s();
+      row.contacts_missing = step.contacts_missing();
+      row.contacts = step.contacts_size();
+      steps.push_back(row);
+    } else if (record.has_status()) {
+      status_records.push_back(record.status());
+      statuses.push_back(&status_records.back());
+    }
+  });
+  std::printf("recording  %s: %s\n", path.c_str(), report.Summary().c_str());
+  if (report.records == 0) {
+    // Not even the header survived (a file cut right after it was created): nothing to report.
+    throw hapco::InputError(path + " holds no complete record (" + report.Summary() +
+                            "): the file was cut before its first record ended");
+  }
+  for (const std::string& line : header_lines) std::fputs(line.c_str(), stdout);
+  if (!have_header) std::printf("header     missing\n");
+  double peak_force_n = 0, peak_device_n = 0;
+  long not_converged = 0, contacts[3] = {0, 0, 0};
+  std::vector<double> step_times, server_times, round_trips;
+  for (const StepRow& step : steps) {
+    ClientSummary& c = clients[texts[step.client]];
     ++c.steps;
-    if (step->contacts_missing()) ++c.without_contacts;
-    if (step->server_time_s() > 0) server_times.push_back(step->server_time_s());
-    const auto& f = step->contact_force_n();
-    const auto& d = step->device_force_n();
-    peak_force_n = std::max(peak_force_n, std::sqrt(f.x() * f.x() + f.y() * f.y() + f.z() * f.z()));
-    peak_device_n = std::max(peak_device_n, std::sqrt(d.x() * d.x() + d.y() * d.y() + d.z() * d.z()));
-    if (step->solver_status() != "converged") ++not_converged;
-    contacts[0] += step->separating();
-    contacts[1] += step->sticking();
-    contacts[2] += step->sliding();
-    step_times.push_back(step->step_s());
-    if (step->round_trip_s() > 0) round_trips.push_back(step->round_trip_s());
+    if (step.contacts_missing) ++c.without_contacts;
+    if (step.server_time_s > 0) server_times.push_back(step.server_time_s);
+    peak_force_n = std::max(peak_force_n, std::sqrt(step.fx * step.fx + step.fy * step.fy + step.fz * step.fz));
+    peak_device_n = std::max(peak_device_n, std::sqrt(step.device_fx * step.device_fx + step.device_fy * step.device_fy +
+                                                      step.device_fz * step.device_fz));
+    if (texts[step.solver_status] != "converged") ++not_converged;
+    contacts[0] += step.separating;
+    contacts[1] += step.sticking;
+    contacts[2] += step.sliding;
+    step_times.push_back(step.step_s);
+    if (step.round_trip_s > 0) round_trips.push_back(step.round_trip_s);
   }
   std::printf("steps      %zu; peak contact force %.3f N, peak device force %.3f N; %ld not converged\n",
               steps.size(), peak_force_n, peak_device_n, not_converged);
@@ -223,27 +287,19 @@ int Run(const Options& options) {
     std::fprintf(csv, "step,client_id,time_ns,dx_m,dy_m,dz_m,fx_n,fy_n,fz_n,device_fx_n,device_fy_n,device_fz_n,"
                       "separating,sticking,sliding,iterations,solver_status,solve_s,step_s,round_trip_s,"
                       "pose_sequence,server_time_s,contacts_missing,contacts,server_id\n");
-    // Online recordings (hapco-recorder) carry the server's time per step but not the solve
-    // and step timings of an offline run: those cells are left empty (unknown), not 0.
-    const bool offline = std::any_of(records.begin(), records.end(), [](const auto& record) {
-      return record.has_header() && record.header().writer() == "hapco-sim";
-    });
     auto seconds_or_empty = [offline](double seconds) {
       char text[32] = "";
       if (offline) std::snprintf(text, sizeof text, "%.6g", seconds);
       return std::string(text);
     };
-    for (const auto* s : steps) {
+    for (const StepRow& s : steps) {
       std::fprintf(csv, "%llu,%s,%lld,%.9g,%.9g,%.9g,%.12g,%.12g,%.12g,%.12g,%.12g,%.12g,%u,%u,%u,%u,%s,%s,%s,%.6g,"
                    "%llu,%.6g,%d,%d,%s\n",
-                   static_cast<unsigned long long>(s->step()), s->client_id().c_str(),
-                   static_cast<long long>(s->time_ns()), s->device_translation_m().x(), s->device_translation_m().y(),
-                   s->device_translation_m().z(), s->contact_force_n().x(), s->contact_force_n().y(),
-                   s->contact_force_n().z(), s->device_force_n().x(), s->device_force_n().y(), s->device_force_n().z(),
-                   s->separating(), s->sticking(), s->sliding(), s->iterations(), s->solver_status().c_str(),
-                   seconds_or_empty(s->solve_s()).c_str(), seconds_or_empty(s->step_s()).c_str(), s->round_trip_s(),
-                   static_cast<unsigned long long>(s->pose_sequence()),
-                   s->server_time_s(), s->contacts_missing() ? 1 : 0, s->contacts_size(), s->server_id().c_str());
+                   static_cast<unsigned long long>(s.step), texts[s.client].c_str(), static_cast<long long>(s.time_ns),
+                   s.dx, s.dy, s.dz, s.fx, s.fy, s.fz, s.device_fx, s.device_fy, s.device_fz, s.separating, s.sticking,
+                   s.sliding, s.iterations, texts[s.solver_status].c_str(), seconds_or_empty(s.solve_s).c_str(),
+                   seconds_or_empty(s.step_s).c_str(), s.round_trip_s, static_cast<unsigned long long>(s.pose_sequence),
+                   s.server_time_s, s.contacts_missing ? 1 : 0, s.contacts, texts[s.server].c_str());
     }
     hapco::CloseOutputFile(csv, csv_path);
     std::printf("csv        %s\n", csv_path.c_str());

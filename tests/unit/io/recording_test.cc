@@ -143,6 +143,64 @@ TEST(RecordingTest, DamagedRecordIsSkippedAndTheRestIsKept) {
   std::filesystem::remove(path);
 }
 
+// VisitRecording (hapco-report: one record at a time, the file mapped) hands over exactly the
+// records ParseRecording returns from the same bytes, damage and a torn tail included, and
+// reads a pipe as well as a file.
+TEST(RecordingTest, VisitingAFileGivesTheRecordsOfParsingItsBytes) {
+  const std::string path = TempPath("visited.hapcorec");
+  std::size_t record_7_start = 0;
+  {
+    RecordingWriter writer(path, MakeHeader());
+    for (int step = 1; step <= 12; ++step) {
+      if (step == 7) record_7_start = std::filesystem::file_size(path);
+      writer.AppendStep(MakeStep(step));
+    }
+  }
+  std::string bytes = ReadBytes(path);
+  bytes[record_7_start + 13] = static_cast<char>(bytes[record_7_start + 13] ^ 0x33);  // damage step 7
+  bytes.resize(bytes.size() - 5);                                                        // tear step 12
+  WriteBytes(path, bytes);
+  RecordingReadReport parsed_report, visited_report;
+  const auto parsed = ParseRecording(bytes, path, &parsed_report);
+  std::vector<recording::Record> visited;
+  VisitRecording(path, &visited_report, [&](const recording::Record& r) { visited.push_back(r); });
+  ASSERT_EQ(visited.size(), parsed.size());
+  ASSERT_EQ(parsed.size(), 11u);  // header + steps 1..11 without 7
+  for (std::size_t i = 0; i < parsed.size(); ++i) EXPECT_TRUE(MessageDifferencer::Equals(visited[i], parsed[i])) << i;
+  EXPECT_EQ(visited_report.Summary(), parsed_report.Summary());
+  EXPECT_EQ(visited_report.damaged_records, 1);
+  EXPECT_TRUE(visited_report.torn_tail);
+  // Through a pipe (not a regular file: read into memory).
+  int fds[2];
+  ASSERT_EQ(pipe(fds), 0);
+  const pid_t child = fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) {
+    close(fds[0]);
+    std::size_t at = 0;
+    while (at < bytes.size()) {
+      const ssize_t n = write(fds[1], bytes.data() + at, bytes.size() - at);
+      if (n <= 0) _exit(1);
+      at += static_cast<std::size_t>(n);
+    }
+    _exit(0);
+  }
+  close(fds[1]);
+  std::vector<recording::Record> piped;
+  RecordingReadReport piped_report;
+  VisitRecording("/proc/self/fd/" + std::to_string(fds[0]), &piped_report,
+                 [&](const recording::Record& r) { piped.push_back(r); });
+  close(fds[0]);
+  int status = 0;
+  waitpid(child, &status, 0);
+  EXPECT_EQ(piped.size(), parsed.size());
+  EXPECT_EQ(piped_report.Summary(), parsed_report.Summary());
+  EXPECT_THROW(VisitRecording(std::filesystem::temp_directory_path().string(), nullptr,
+                              [](const recording::Record&) {}),
+               InputError);
+  std::filesystem::remove(path);
+}
+
 TEST(RecordingTest, NotARecordingIsAClearError) {
   const std::string path = TempPath("not.hapcorec");
   WriteBytes(path, "step,force\n1,2\n");
