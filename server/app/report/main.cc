@@ -314,8 +314,12 @@ int Run(const Options& options) {
     const std::string command = "/usr/bin/python3 " + Quote(scripts + "/plot_recording.py") + " " + Quote(csv_path) +
                                 " " + Quote(plots_dir);
     std::fflush(stdout);  // keep our lines before the script's
-    if (std::system(command.c_str()) != 0) {
-      throw hapco::InputError("chart script failed: " + command + " (is python3-matplotlib installed?)");
+    const int status = std::system(command.c_str());
+    if (status != 0) {
+      // (Piped into `head`, the script died of a closed stdout, and this blamed matplotlib.)
+      throw hapco::InputError("chart script failed (exit status " + std::to_string(status) + "): " + command +
+                              " (its messages are above; without any, is python3-matplotlib installed? was the "
+                              "output piped into a command that closed it early?)");
     }
   }
   return 0;

@@ -91,7 +91,7 @@ int Run(const Options& o) {
       char line[1024];
       std::snprintf(
           line, sizeof(line),
-          "hapco-status: server %s, domain %d, up %.1f s, %" PRIu32 " of %" PRIu32 " sessions, scenes %s, pose "
+          "hapco-status: server %s, domain %d, serving for %.1f s (scene ready), %" PRIu32 " of %" PRIu32 " sessions, scenes %s, pose "
           "received to answered p50 %.0f us p99 %.0f us max %.0f us, queueing included (mean per pose: physics %.0f, model %.0f, force write %.0f, contact "
           "frame %.0f us), status age %.3f s; bad input: nan %" PRIu64 ", workspace %" PRIu64
           ", jumps %" PRIu64 ", out-of-order %" PRIu64 ", duplicates %" PRIu64 ", unknown clients %" PRIu64

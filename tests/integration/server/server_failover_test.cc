@@ -385,7 +385,7 @@ TEST(ServerFailover, ThreeServersServeEachClientOnceAndTakeOverTheClientsOfOneTh
   Process status_tool({HAPCO_STATUS_EXE, "--domain", domain}, dir + "/status.out", dir + "/status.err");
   ASSERT_EQ(status_tool.Wait(60'000), 0) << ReadFile(dir + "/status.err");
   for (const std::string& id : ids) {
-    EXPECT_NE(ReadFile(dir + "/status.out").find("server " + id + ", domain " + domain + ", up "), std::string::npos)
+    EXPECT_NE(ReadFile(dir + "/status.out").find("server " + id + ", domain " + domain + ", serving for "), std::string::npos)
         << ReadFile(dir + "/status.out");
   }
   // A recorder of every session on every server (steps carry the server that made them).
