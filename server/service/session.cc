@@ -219,9 +219,13 @@ void Session::NotifyIgnored(const hapco_idl_DevicePose& pose, int64_t receive_ns
   notice.model.valid = false;  // a notice is no new force, and carries no model
   notice.recent_count = 0;
   notice.ignored_poses = counters_.ignored_poses;
-  notice.server_send_ns = MonotonicNowNs();
+  WriteNotice(&notice);
+}
+
+void Session::WriteNotice(hapco_idl_FeedbackForce* notice) {
+  notice->server_send_ns = MonotonicNowNs();
   if (!open()) return;
-  if (force_writer_->Write(notice) == DDS_RETCODE_OK) {
+  if (force_writer_->Write(*notice) == DDS_RETCODE_OK) {
     ++counters_.ignored_notices;
   } else {
     ++counters_.force_write_errors;
@@ -242,13 +246,7 @@ void Session::NotifyOtherDevice(const hapco_idl_DevicePose& pose, int64_t receiv
   notice.model = hapco_idl_LocalContactModel{};
   notice.recent_count = 0;
   notice.separating_count = notice.sticking_count = notice.sliding_count = 0;
-  notice.server_send_ns = MonotonicNowNs();
-  if (!open()) return;
-  if (force_writer_->Write(notice) == DDS_RETCODE_OK) {
-    ++counters_.ignored_notices;
-  } else {
-    ++counters_.force_write_errors;
-  }
+  WriteNotice(&notice);
 }
 
 void Session::FillLocalModel(bool force_is_from_this_step, bool linearized) {

@@ -160,6 +160,8 @@ class Session {
   const Topic<hapco_idl_FeedbackForce>* force_topic_;
   Writer<hapco_idl_ContactStateFrame> contact_writer_;
   std::optional<Writer<hapco_idl_FeedbackForce>> force_writer_;  // created by TryOpen
+  // Stamps and writes a notice (NotifyIgnored, NotifyOtherDevice), counted.
+  void WriteNotice(hapco_idl_FeedbackForce* notice);
   uint32_t recorders_missing_at_open_ = 0;
   bool recorders_unconfirmed_at_open_ = false;
   SessionStageTimes stage_times_;

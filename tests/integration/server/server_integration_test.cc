@@ -180,6 +180,15 @@ TEST(ServerProcess, FreePathOffTheScriptedFootprintGetsTheOfflineForces) {
   EXPECT_GT(last.z(), 0.5) << "pressed 2 mm, 30 mm off the scripted footprint: " << last.transpose();
 }
 
+// DIR/press.csv: 2 mm into the bar in 0.1 mm steps, then held; DIR/hover.csv: 5 mm above it.
+void WritePressAndHoverPaths(const std::string& dir) {
+  std::ofstream press(dir + "/press.csv"), hover(dir + "/hover.csv");
+  press << "x_m,y_m,z_m\n";
+  hover << "x_m,y_m,z_m\n";
+  for (int k = 1; k <= 20; ++k) press << 0 << "," << 0 << "," << -1e-4 * k << "\n";
+  for (int k = 0; k < 20; ++k) hover << 0 << "," << 0 << "," << 0.005 << "\n";
+}
+
 // The served device leaves (a normal exit: SESSION_LEAVE) while another device under its id
 // still runs: that device gets a session of its own (it was stranded: no force, no notice,
 // for the rest of its run; a helper session). A recorder sees three sessions of 'twin': the
@@ -188,13 +197,7 @@ TEST(ServerProcess, FreePathOffTheScriptedFootprintGetsTheOfflineForces) {
 TEST(ServerProcess, WhenTheServedDeviceLeavesTheOtherDeviceUnderItsIdIsServedAgain) {
   const std::string dir = TestDir();
   const std::string domain = std::to_string(SetUpTestDomain());
-  {
-    std::ofstream press(dir + "/press.csv"), hover(dir + "/hover.csv");
-    press << "x_m,y_m,z_m\n";
-    hover << "x_m,y_m,z_m\n";
-    for (int k = 1; k <= 20; ++k) press << 0 << "," << 0 << "," << -1e-4 * k << "\n";
-    for (int k = 0; k < 20; ++k) hover << 0 << "," << 0 << "," << 0.005 << "\n";
-  }
+  WritePressAndHoverPaths(dir);
   Process server({HAPCO_SERVER_EXE, kScene, "--domain", domain}, dir + "/server.out", dir + "/server.err");
   Process recorder({HAPCO_RECORDER_EXE, kScene, "--output", dir + "/twin.hapcorec", "--domain", domain},
                    dir + "/recorder.out", dir + "/recorder.err");
@@ -253,13 +256,7 @@ TEST(ServerProcess, WhenTheServedDeviceLeavesTheOtherDeviceUnderItsIdIsServedAga
 TEST(ServerProcess, ASecondDeviceUnderOneClientIdTakesTheSessionAndTheFirstIsTold) {
   const std::string dir = TestDir();
   const std::string domain = std::to_string(SetUpTestDomain());
-  {
-    std::ofstream press(dir + "/press.csv"), hover(dir + "/hover.csv");
-    press << "x_m,y_m,z_m\n";
-    hover << "x_m,y_m,z_m\n";
-    for (int k = 1; k <= 20; ++k) press << 0 << "," << 0 << "," << -1e-4 * k << "\n";
-    for (int k = 0; k < 20; ++k) hover << 0 << "," << 0 << "," << 0.005 << "\n";
-  }
+  WritePressAndHoverPaths(dir);
   Process server({HAPCO_SERVER_EXE, kScene, "--domain", domain}, dir + "/server.out", dir + "/server.err");
   {
     // The hovering device first, then (once its session is open) the pressing one, which
