@@ -25,7 +25,12 @@ void ClientSessions::Add(const recording::Step& step) {
     sessions_.push_back({step.server_id(), number, number, 1, 0, step.contacts_missing()});
     return;
   }
-  current->missing += number - current->last_step - 1;
+  const std::uint64_t gap = number - current->last_step - 1;
+  current->missing += gap;
+  if (gap > current->largest_gap) {
+    current->largest_gap = gap;
+    current->largest_gap_first = current->last_step + 1;
+  }
   current->last_step = number;
   current->last_force_only = step.contacts_missing();
   ++current->steps;

@@ -206,6 +206,18 @@ int Run(const Options& options) {
                 id.c_str(), c.steps, count, count == 1 ? "" : "s", sessions.c_str(), gaps + before + lost_at_start,
                 before_text.c_str(),
                 c.without_contacts);
+    // Where the steps inside the sessions went: the longest run (a stopped recorder, a loaded host).
+    const hapco::io::RecordedSession* widest = nullptr;
+    for (const hapco::io::RecordedSession& s : c.sessions.sessions()) {
+      if (s.largest_gap > 0 && (widest == nullptr || s.largest_gap > widest->largest_gap)) widest = &s;
+    }
+    if (widest != nullptr) {
+      std::printf("gaps       %s: %llu steps missing inside its sessions, the longest run %llu steps (%llu..%llu%s%s)\n",
+                  id.c_str(), gaps, static_cast<unsigned long long>(widest->largest_gap),
+                  static_cast<unsigned long long>(widest->largest_gap_first),
+                  static_cast<unsigned long long>(widest->largest_gap_first + widest->largest_gap - 1),
+                  widest->server_id.empty() ? "" : " on ", widest->server_id.c_str());
+    }
   }
   // Offline recordings time every step; online ones carry the server's pose-in -> force-out.
   if (!step_times.empty() && percentile(step_times, 1.0) > 0) {

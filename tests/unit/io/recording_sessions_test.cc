@@ -51,6 +51,17 @@ TEST(RecordingSessions, OneServerWithAGapIsOneSession) {
   EXPECT_EQ(Listing(SessionsOf({{"a", 1}, {"a", 2}, {"a", 5}, {"a", 6}})), "1..6 on a (4, 2 missing)");
 }
 
+// Where the missing steps are: the longest run inside a session, by its first step.
+TEST(RecordingSessions, TheLongestGapIsNamedByItsFirstStep) {
+  const auto sessions = SessionsOf({{"a", 1}, {"a", 2}, {"a", 5}, {"a", 6}, {"a", 20}, {"a", 21}, {"a", 23}});
+  ASSERT_EQ(sessions.size(), 1u);
+  EXPECT_EQ(sessions[0].missing, 2u + 13u + 1u);
+  EXPECT_EQ(sessions[0].largest_gap, 13u);        // 7..19
+  EXPECT_EQ(sessions[0].largest_gap_first, 7u);
+  const auto whole = SessionsOf({{"a", 1}, {"a", 2}, {"a", 3}});
+  EXPECT_EQ(whole[0].largest_gap, 0u);
+}
+
 TEST(RecordingSessions, ACounterStartingAgainOrAnotherServerStartsASession) {
   // Restart on a, move to b, back to a (a's counter from 1 again).
   EXPECT_EQ(Listing(SessionsOf({{"a", 1}, {"a", 2}, {"a", 1}, {"b", 1}, {"b", 2}, {"a", 1}})),
