@@ -125,9 +125,10 @@ std::string RecordingReadReport::Summary() const {
 namespace {
 
 // The parse loop of ParseRecording and VisitRecording: every complete, checksum-valid record
-// goes to `visit` (`record` is reused), damage is skipped by resyncing on the record magic.
+// goes to `visit` (`record` is reused; a visitor may move it out), damage is skipped by
+// resyncing on the record magic.
 void ParseRecords(std::string_view data, const std::string& path, RecordingReadReport* report,
-                  const std::function<void(const recording::Record&)>& visit) {
+                  const std::function<void(recording::Record&)>& visit) {
   if (data.size() < sizeof(kFileMagic) || std::memcmp(data.data(), kFileMagic, sizeof(kFileMagic)) != 0) {
     throw InputError(path + " is not a HapCo recording (missing the HAPCOREC magic)");
   }
@@ -188,10 +189,9 @@ void ParseRecords(std::string_view data, const std::string& path, RecordingReadR
   if (report != nullptr) *report = local;
 }
 
-}  // namespace
-
-void VisitRecording(const std::string& path, RecordingReadReport* report,
-                    const std::function<void(const recording::Record&)>& visit) {
+// VisitRecording's body, with a visitor that may move the record out (ReadRecording).
+void VisitRecordsOfFile(const std::string& path, RecordingReadReport* report,
+                        const std::function<void(recording::Record&)>& visit) {
   const int fd = open(path.c_str(), O_RDONLY | O_CLOEXEC);
   if (fd < 0) throw InputError("cannot open recording " + path);
   struct stat st {};
@@ -228,16 +228,23 @@ void VisitRecording(const std::string& path, RecordingReadReport* report,
   munmap(map, size);
 }
 
+}  // namespace
+
+void VisitRecording(const std::string& path, RecordingReadReport* report,
+                    const std::function<void(const recording::Record&)>& visit) {
+  VisitRecordsOfFile(path, report, [&visit](recording::Record& record) { visit(record); });
+}
+
 std::vector<recording::Record> ReadRecording(const std::string& path, RecordingReadReport* report) {
   std::vector<recording::Record> records;
-  VisitRecording(path, report, [&records](const recording::Record& record) { records.push_back(record); });
+  VisitRecordsOfFile(path, report, [&records](recording::Record& record) { records.push_back(std::move(record)); });
   return records;
 }
 
 std::vector<recording::Record> ParseRecording(std::string_view data, const std::string& path,
                                               RecordingReadReport* report) {
   std::vector<recording::Record> records;
-  ParseRecords(data, path, report, [&records](const recording::Record& record) { records.push_back(record); });
+  ParseRecords(data, path, report, [&records](recording::Record& record) { records.push_back(std::move(record)); });
   return records;
 }
 
