@@ -132,17 +132,25 @@ bool ServerLoop::OpenWaitingSessions(int64_t now_ns) {
   return waiting;
 }
 
-bool ServerLoop::TryOpenSession(Client* client, uint32_t recorders, int64_t now_ns) {
-  if (!client->session->TryOpen(recorders, now_ns)) return false;
-  if (const uint32_t missing = client->session->recorders_missing_at_open(); missing > 0) {
-    Log(kLogSession, "session of '" + client->session->client_id() + "' opened without " + std::to_string(missing) +
-                         " of the " + std::to_string(recorders) +
-                         " recorders present (their readers did not match its writer within 2 s): its first steps may "
-                         "be missing from their recordings");
-  } else if (client->session->recorders_unconfirmed_at_open()) {
-    Log(kLogSession, "session of '" + client->session->client_id() +
-                         "' opened before its readers acknowledged its first frame (2 s): its first steps may be "
-                         "missing from their recordings");
+bool ServerLoop::TryOpenSession(Client* client, uint32_t recorders, int64_t now_ns, bool device_waiting) {
+  Session& session = *client->session;
+  if (!session.TryOpen(recorders, now_ns, device_waiting)) return false;
+  // How long the client waited for its session (a moved client: part of the failover budget,
+  // docs/several-servers.md), and whether the recorders were in step.
+  char after[160];
+  std::snprintf(after, sizeof after, "' open after %.1f ms", static_cast<double>(session.opened_after_ns()) * 1e-6);
+  const std::string why = device_waiting ? "a device already sending poses (a client that moved here) is not kept waiting"
+                                         : "waited 2 s";
+  if (const uint32_t missing = session.recorders_missing_at_open(); missing > 0) {
+    Log(kLogSession, "session of '" + session.client_id() + after + " without " + std::to_string(missing) + " of the " +
+                         std::to_string(recorders) + " recorders present (their readers had not matched its writer; " +
+                         why + "): its first steps may be missing from their recordings");
+  } else if (session.recorders_unconfirmed_at_open()) {
+    Log(kLogSession, "session of '" + session.client_id() + after + " before its recorders acknowledged its first frame (" +
+                         why + "): its first steps may be missing from their recordings");
+  } else if (recorders > 0) {
+    Log(kLogSession, "session of '" + session.client_id() + after + ", its " + std::to_string(recorders) +
+                         " recorder(s) in step");
   }
   return true;
 }
@@ -464,9 +472,10 @@ void ServerLoop::ProcessPoses() {
       }
     }
     client->last_heard_ns = receive_ns;
-    if (!client->session->open() && !TryOpenSession(client, recorder_probe_.MatchedReaders(), receive_ns)) {
-      ++counters_.poses_before_open;  // the session waits for its recorders (Session::TryOpen)
-      continue;
+    // A pose before the session opened: a device in use (a client that moved here) is not
+    // kept waiting for the recorders (Session::TryOpen).
+    if (!client->session->open()) {
+      TryOpenSession(client, recorder_probe_.MatchedReaders(), receive_ns, /*device_waiting=*/true);
     }
     if (const hapco_idl_DevicePose* last = client->queued.last(); last != nullptr && pose.sequence_number <= last->sequence_number) {
       Count(pose.sequence_number == last->sequence_number ? PoseVerdict::kDuplicate : PoseVerdict::kOutOfOrder, id);

@@ -78,7 +78,6 @@ struct ServerCounters {
   uint64_t sessions_closed = 0;
   uint64_t status_published = 0;
   uint64_t poses_after_leave = 0;   // poses of a client that left, ignored until it joins again
-  uint64_t poses_before_open = 0;   // poses of a session still waiting for the recorders (Session::TryOpen)
   uint64_t parallel_batches = 0;    // ticks that stepped two or more sessions on the pool
   uint64_t burst_steps = 0;         // poses stepped after another of the same client in one tick
   uint64_t recovered_poses = 0;     // poses never received, stepped from a later pose's repeats
@@ -169,7 +168,7 @@ class ServerLoop {
   // Opens the sessions whose recorders are ready (Session::TryOpen); true if any still waits.
   bool OpenWaitingSessions(int64_t now_ns);
   // Session::TryOpen, logging a session that opened without all its recorders.
-  bool TryOpenSession(Client* client, uint32_t recorders, int64_t now_ns);
+  bool TryOpenSession(Client* client, uint32_t recorders, int64_t now_ns, bool device_waiting = false);
   Client* OpenSession(const std::string& client_id, const sim::TwoBodyModel& model);
   // The served scene called `scene_name` (the first one for ""), nullptr if none.
   void CloseSession(std::map<std::string, Client>::iterator it, const std::string& why);  // counters kept, logged

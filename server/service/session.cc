@@ -71,12 +71,14 @@ Session::Session(std::string client_id, const sim::TwoBodyModel& model,
   contact_writer_.Write(*frame_);
 }
 
-bool Session::TryOpen(uint32_t recorders, int64_t now_ns) {
+bool Session::TryOpen(uint32_t recorders, int64_t now_ns, bool device_waiting) {
   if (open()) return true;
   const uint32_t matched = contact_writer_.MatchedReaders();
   // (A zero timeout only looks: the hello frame acknowledged by every matched reader.)
+  if (matched >= recorders && readers_matched_ns_ < 0) readers_matched_ns_ = now_ns;
   const bool acknowledged = matched >= recorders && contact_writer_.WaitForAcks(0) == DDS_RETCODE_OK;
-  if (!acknowledged && now_ns - created_ns_ < kRecorderWaitNs) return false;
+  if (!acknowledged && !device_waiting && now_ns - created_ns_ < kRecorderWaitNs) return false;
+  opened_ns_ = now_ns;
   recorders_missing_at_open_ = matched < recorders ? recorders - matched : 0;
   recorders_unconfirmed_at_open_ = !acknowledged;
   force_writer_.emplace(publisher_, *force_topic_);

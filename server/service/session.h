@@ -84,8 +84,14 @@ class Session {
   // step of the session is missing from their recordings: with DDS-Security a new writer
   // needs its keys exchanged, ~90 ms here) or kRecorderWaitNs after creation, whichever comes
   // first. The client's Connect waits for the force writer, so it starts when the recorders
-  // are ready. Returns open().
-  bool TryOpen(uint32_t recorders, int64_t now_ns);
+  // are ready. A device already sending poses (a client that moved here from a server that
+  // died, or one that never waits for its session) is not kept waiting: with
+  // `device_waiting` the session opens at once, acknowledged or not. Its recorders still get
+  // the frames of its first kContactStateDepth steps (transient-local history); a recorder
+  // slower to find its writer misses the first steps, which hapco-report names as a gap.
+  // (Waiting for them cost a moved client 200-260 ms without a force on a loaded host, against
+  // the failover budget of 100 ms after the client's timeout: CI 2026-12-07.) Returns open().
+  bool TryOpen(uint32_t recorders, int64_t now_ns, bool device_waiting = false);
   bool open() const { return force_writer_.has_value(); }
   // 2 s: 0.5 s was not enough on a loaded host (compose on 2 cores, CI 2026-12-06: a session
   // opened before the recorder had its writer, and its first steps were missing from the
@@ -95,6 +101,9 @@ class Session {
   // and whether it opened before its readers had acknowledged its hello frame.
   uint32_t recorders_missing_at_open() const { return recorders_missing_at_open_; }
   bool recorders_unconfirmed_at_open() const { return recorders_unconfirmed_at_open_; }
+  // From creation to its readers matching (-1: they never did) and to opening, ns.
+  int64_t readers_matched_after_ns() const { return readers_matched_ns_ < 0 ? -1 : readers_matched_ns_ - created_ns_; }
+  int64_t opened_after_ns() const { return opened_ns_ - created_ns_; }
 
   // Classifies a pose against the limits and this session's stream (no state change except
   // the flood window, which counts every pose seen). receive_ns: server CLOCK_MONOTONIC.
@@ -166,6 +175,8 @@ class Session {
   bool recorders_unconfirmed_at_open_ = false;
   SessionStageTimes stage_times_;
   int64_t created_ns_;
+  int64_t readers_matched_ns_ = -1;  // first TryOpen that saw every recorder's reader matched
+  int64_t opened_ns_ = -1;
   SamplePtr<hapco_idl_ContactStateFrame> frame_;  // reserved once, reused every step
   hapco_idl_FeedbackForce force_{};
   PoseStream stream_;  // flood bucket, order and jump checks (the fuzzed code, pose_intake.h)

@@ -484,11 +484,10 @@ TEST(ServerFailover, ThreeServersServeEachClientOnceAndTakeOverTheClientsOfOneTh
       continue;
     }
     if (gap_ns.count(client) != 0) {
-      // Timeout (50 ms) + a new session on another server: forces within 100 ms of the timeout.
-      const double gap_ms = static_cast<double>(gap_ns[client]) * 1e-6;
-      std::printf("%s moved from %s to %s: %.1f ms without a force\n", client.c_str(), killed.c_str(),
-                  s.last_server.c_str(), gap_ms);
-      EXPECT_LT(gap_ms, kTimeoutS * 1e3 + 100.0) << client;
+      // (The gap as this test's reader saw it, which includes the test process's own stalls;
+      // the bound is checked below on what the device saw.)
+      std::printf("%s moved from %s to %s: %.1f ms between forces seen by the test\n", client.c_str(), killed.c_str(),
+                  s.last_server.c_str(), static_cast<double>(gap_ns[client]) * 1e-6);
       EXPECT_EQ(out.find("moved to another server 0 times"), std::string::npos) << out;
     }
     // (A client of a surviving server may move too: on a loaded machine its own stalls can
@@ -523,6 +522,33 @@ TEST(ServerFailover, ThreeServersServeEachClientOnceAndTakeOverTheClientsOfOneTh
       ASSERT_TRUE(inserted) << row.at("client_id") << " pose " << row.at("sequence") << " stepped by " << it->second
                             << " and " << id;
     }
+  }
+  // What each moved device saw (its own per-tick CSV, its clock): from the tick that took the
+  // killed server's last force to the first that took another server's. Timeout (50 ms) + a
+  // new session on another server: forces again within 100 ms of the timeout. (Measured on
+  // the test's reader, a loaded CI host once stalled the test itself for 3.5 s while the
+  // devices had forces again after ~70 ms.)
+  for (const auto& [client, gap] : gap_ns) {
+    const std::vector<Tick> ticks = ReadTicks(dir + "/" + client + ".csv");
+    auto server_of = [&](long long sequence) -> std::string {
+      if (sequence < 0) return "";
+      const auto it = stepped_by.find({client, std::to_string(sequence)});
+      return it == stepped_by.end() ? "?" : it->second;
+    };
+    double last_killed_s = -1, first_other_s = -1;
+    for (const Tick& t : ticks) {
+      const std::string server = server_of(t.force_sequence);
+      if (server == killed) {
+        last_killed_s = t.time_s;
+      } else if (!server.empty() && server != "?" && last_killed_s >= 0 && first_other_s < 0) {
+        first_other_s = t.time_s;
+      }
+    }
+    ASSERT_GE(last_killed_s, 0) << client << ": no force of " << killed << " in its CSV";
+    ASSERT_GE(first_other_s, 0) << client << ": no force of another server after " << killed << "'s last";
+    const double device_gap_ms = (first_other_s - last_killed_s) * 1e3;
+    std::printf("%s: %.1f ms without a force on the device (its CSV)\n", client.c_str(), device_gap_ms);
+    EXPECT_LT(device_gap_ms, kTimeoutS * 1e3 + 100.0) << client;
   }
   // Each server's log names every client it took over (they come at once: at one session line
   // a second, a helper session's log named 2 of 4 takeovers).
