@@ -26,6 +26,8 @@ class StaticBoxTree {
   // allocation-free call.
   void Overlapping(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, std::vector<int>* hits,
                    std::vector<int>* stack) const;
+  // Whether any box overlaps [lo, hi] (closed), stopping at the first found.
+  bool AnyOverlapping(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, std::vector<int>* stack) const;
 
  private:
   // Leaves hold order_[first, first + count); an internal node (count == 0) has its left

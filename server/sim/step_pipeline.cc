@@ -175,6 +175,29 @@ void TwoBodySession::Reset() {
   active_obstacle_.clear();
 }
 
+void TwoBodySession::Release() {
+  tool_displacement_m_.noalias() = model_.tool_unit_fields() * device_translation_m_;
+  obstacle_displacement_m_.setZero();
+  for (int slot : tool_loaded_) {
+    tool_slot_loaded_[static_cast<std::size_t>(slot)] = 0;
+    tool_slot_force_n_.segment<3>(3 * slot).setZero();
+  }
+  for (int slot : obstacle_loaded_) {
+    obstacle_slot_loaded_[static_cast<std::size_t>(slot)] = 0;
+    obstacle_slot_force_n_.segment<3>(3 * slot).setZero();
+  }
+  tool_loaded_.clear();
+  obstacle_loaded_.clear();
+  for (int id : previous_ids_) force_by_id_n_.segment<3>(3 * id).setZero();
+  previous_ids_.clear();
+  std::fill(tool_previous_triangle_.begin(), tool_previous_triangle_.end(), -1);
+  std::fill(edge_previous_triangle_.begin(), edge_previous_triangle_.end(), -1);
+  last_residual_penetration_m_ = 0.0;
+  for (int node : obstacle_surface_.nodes) {
+    obstacle_positions_m_.row(node) = model_.obstacle().mesh().nodes_m.row(node);
+  }
+}
+
 void TwoBodySession::BroadPhase(const Eigen::Vector3d& increment_m) {
   // Predicted tool surface: last displacement plus the rigid increment of the device.
   const auto& tool_nodes = tool_surface_.nodes;
@@ -553,6 +576,21 @@ const StepOutput& TwoBodySession::StepOnce(const Eigen::Vector3d& device_transla
   //    pairs within twice the step's travel too, and the solve (W holds the springback) decides
   //    which still push. (Without contacts nothing is loaded and nothing springs back.)
   Stopwatch watch;
+  // 0. A tool lifted clear of the obstacle lets go. The staggered detection (step 1 below)
+  //    finds contacts on the configuration the last forces predict; after a push far past what
+  //    small strain describes (a device driven millimetres into a clamped end face, kN on a few
+  //    nodes) that configuration is so bent that it still reaches the obstacle with the rigid
+  //    tool millimetres clear of it, and the bent state is an equilibrium of the linear model:
+  //    5 424 N at a pose that gives 0 N when reached through air (docs/free-interaction.md, "A
+  //    tool driven into the clamped end face"). With every rigid gap open the only solution is
+  //    zero force (TwoBodyModel::RigidToolClearOfObstacle), so the state is dropped.
+  //    (Only a loaded state: contacts kept within the activation gap carry zero force.)
+  const bool was_loaded = std::any_of(previous_ids_.begin(), previous_ids_.end(),
+                                      [&](int id) { return !force_by_id_n_.segment<3>(3 * id).isZero(0.0); });
+  if (was_loaded && model_.RigidToolClearOfObstacle(device_translation_m, &tree_stack_)) {
+    Release();
+    output_.released = true;
+  }
   const double travel_m = (device_translation_m - device_translation_m_).norm();
   const double activation_gap_m =
       previous_ids_.empty() ? model_.scene().activation_gap_m : std::max(model_.scene().activation_gap_m, 2.0 * travel_m);

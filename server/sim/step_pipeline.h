@@ -93,6 +93,10 @@ struct StepOutput {
   // whether the answer is still at a pose on the way (true) rather than at the device's.
   int approach_steps = 0;
   bool approaching = false;
+  // The rigid tool at this pose was clear of the obstacle while the last step still had
+  // contacts: their state (forces, both bodies' deformation) was dropped before this step
+  // (TwoBodySession::Release).
+  bool released = false;
   double detect_seconds = 0.0;    // broad phase (incl. the obstacle displacement there) + both passes
   double assemble_seconds = 0.0;  // ũ and W
   double solve_seconds = 0.0;
@@ -184,6 +188,9 @@ class TwoBodySession {
   void BroadPhase(const Eigen::Vector3d& increment_m);
   // U = C f of the last forces on the region slots (kPrecomputed).
   void ObstacleDisplacementOnRegion();
+  // Drops the last contacts' forces and both bodies' deformation: the tool back to its free
+  // (rigid) displacement at the last pose, the obstacle undeformed. Allocation-free.
+  void Release();
   static void SlotRuns(const std::vector<int>& slots, std::vector<std::pair<int, int>>* runs);
   void DetectContacts(const Eigen::Vector3d& device_translation_m);
   void CompleteContactDisplacements();

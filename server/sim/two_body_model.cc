@@ -462,6 +462,9 @@ TwoBodyModel::TwoBodyModel(Parts parts)
 
   // A tool that starts inside the obstacle has no meaningful first step: say how deep.
   obstacle_locator_ = TetrahedronLocator(obstacle_mesh);
+  // (The whole tool, not only its contact candidates: the box must hold all of it.)
+  tool_lo_m_ = tool_mesh.nodes_m.colwise().minCoeff().transpose();
+  tool_hi_m_ = tool_mesh.nodes_m.colwise().maxCoeff().transpose();
   {
     ContactDetector detector(obstacle_surface_.triangles, obstacle_mesh.nodes_m, tool_surface_.nodes,
                              tool_surface_.node_normals, obstacle_surface_.subtriangle_faces);
@@ -564,6 +567,15 @@ bool TwoBodyModel::ToolInsideObstacle(const Eigen::Vector3d& device_translation_
     if (hits.empty()) return true;
   }
   return false;
+}
+
+bool TwoBodyModel::RigidToolClearOfObstacle(const Eigen::Vector3d& device_translation_m, std::vector<int>* stack) const {
+  const Eigen::Vector3d lo = tool_lo_m_ + device_translation_m, hi = tool_hi_m_ + device_translation_m;
+  if (obstacle_surface_.triangle_tree.AnyOverlapping(lo, hi, stack)) return false;
+  // No face near: wholly outside, or wholly inside (one node tells; brute force, but only
+  // inside the obstacle's box, where a tool that meets no face is rare).
+  return tool_surface_.nodes.empty() ||
+         !obstacle_locator_.Contains(Position(tool_.mesh(), tool_surface_.nodes.front()) + device_translation_m);
 }
 
 std::string StartingPositionNote(const TwoBodyModel& model) {

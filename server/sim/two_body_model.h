@@ -152,6 +152,13 @@ class TwoBodyModel {
   // faces (touching is not inside). Used on a session's first step only
   // (TwoBodySession::Step); ~0.3 ms for benchmark 1.
   bool ToolInsideObstacle(const Eigen::Vector3d& device_translation_m) const;
+  // True when the undeformed tool moved by d (m) is clear of the undeformed obstacle: its
+  // bounding box meets the box of no obstacle contact face, and it is not wholly inside the
+  // obstacle. Conservative (boxes): false may still be clear. Then no contact can hold: with
+  // every gap of the rigid configuration open, the linear contact problem's only solution is
+  // zero force (contact forces push the bodies apart, r·Wr > 0), whatever the bodies' last
+  // deformation (TwoBodySession::StepOnce releases it). A few µs; *stack is scratch.
+  bool RigidToolClearOfObstacle(const Eigen::Vector3d& device_translation_m, std::vector<int>* stack) const;
   // The mean outward normal of the obstacle faces nearest the tool at the start (unit; zero
   // when the tool faces none within reach): the direction a session's approach presses along.
   const Eigen::Vector3d& approach_normal() const { return approach_normal_; }
@@ -178,6 +185,8 @@ class TwoBodyModel {
   TwoBodyModelStats stats_;
   TetrahedronLocator obstacle_locator_;  // the obstacle's volume (start check, ToolInsideObstacle)
   Eigen::Vector3d approach_normal_ = Eigen::Vector3d::Zero();
+  // Bounding box of the undeformed tool, m (RigidToolClearOfObstacle).
+  Eigen::Vector3d tool_lo_m_ = Eigen::Vector3d::Zero(), tool_hi_m_ = Eigen::Vector3d::Zero();
 };
 
 // A note for the user when the tool does not touch the obstacle at the start (its gap exceeds

@@ -402,6 +402,7 @@ int Run(const Options& options) {
   }
   int not_converged = 0;
   int out_of_range = 0;  // steps that needed a node pair beyond a banded compliance
+  int releases = 0;      // steps that dropped a loaded contact state: the tool lifted clear (StepOutput::released)
   double peak_force_n = 0;
   long total_iterations = 0;
   hapco::Stopwatch run;
@@ -475,6 +476,7 @@ int Run(const Options& options) {
     }
     if (out.status != hapco::contact::SolverStatus::kConverged) ++not_converged;
     if (out.compliance_out_of_range) ++out_of_range;
+    if (out.released) ++releases;
     peak_force_n = std::max(peak_force_n, out.contact_force_n.norm());
     total_iterations += out.iterations;
     if (csv != nullptr) {
@@ -525,6 +527,12 @@ int Run(const Options& options) {
                 "(status model / apart in the CSV), the others stepped, %ld extra steps at turning poses\n",
                 options.multirate.physics_every, options.multirate.max_model_distance_m, model_answers,
                 answerer->turn_steps());
+  }
+  if (releases > 0) {
+    std::printf("the tool was lifted clear of the obstacle with forces still on it %d times: each time the contact "
+                "state was dropped (the linear model's bent state after a push far into a rigid face would hold "
+                "itself there; docs/free-interaction.md)\n",
+                releases);
   }
   if (model.obstacle_surface().range_axis >= 0) {
     std::printf("compliance range %.3g m: %d steps needed a node pair beyond it%s\n", model.obstacle_surface().range_m,
