@@ -398,6 +398,7 @@ void PhantomClient::Run(const std::atomic<bool>& stop, const std::function<void(
   double last_stale_answer_log_s = -1;  // when the last "answers to poses ... old" line was logged
   double last_waiting_log_s = -1;       // when the last "still no force" line was logged
   double stale_since_s = 0;             // when the current force timeout began
+  double last_other_device_s = -1;      // when the last "serves another device" notice came
   // Send time of the last kSentPoses poses by sequence % kSentPoses (8 s at 1 kHz: an answer
   // later than that is stale anyway); 0 = none sent (MonotonicNowNs is never 0 after boot).
   std::vector<int64_t> sent_time_ns(kSentPoses, 0);
@@ -501,6 +502,7 @@ void PhantomClient::Run(const std::atomic<bool>& stop, const std::function<void(
       if (r.verdict == ServerVerdict::kOtherDevice) {
         // Its poses are not stepped at all: no force comes, and the safety filter ramps to zero.
         ++stats_.other_device_notices;
+        last_other_device_s = now_s;
         if (log && LogDue(&last_notice_log_s, now_s)) {
           char line[320];
           std::snprintf(line, sizeof(line),
@@ -600,13 +602,15 @@ void PhantomClient::Run(const std::atomic<bool>& stop, const std::function<void(
     // for 4-7 s between "ramping the force to zero" and "moving ..." (a helper session).
     if (stale && log && LogDue(&last_waiting_log_s, now_s)) {
       char line[240];
-      // (A server that serves another device under this id is not waited for: it is told.)
+      // (A server that serves another device under this id is not waited for: it is told. Only
+      // while its notices come (one every 100 ms at most): a notice long past does not explain a
+      // later stall, which this line once blamed on it.)
+      const bool other_device_now = last_other_device_s >= 0 && now_s - last_other_device_s < 1.0;
       std::snprintf(line, sizeof(line), "t=%.3f s: still no force after %.0f s: waiting for a server%s", now_s,
                     now_s - stale_since_s,
-                    stats_.other_device_notices > 0 ? " that serves this device (the one found serves another under "
-                                                      "this client id)"
-                    : config_.server_id.empty()     ? " serving the scene (any will do)"
-                                                    : "");
+                    other_device_now ? " that serves this device (the one found serves another under this client id)"
+                    : config_.server_id.empty() ? " serving the scene (any will do)"
+                                                : "");
       log(line);
     }
     was_stale = stale;
