@@ -455,6 +455,16 @@ void TwoBodySession::DetectContacts(const Eigen::Vector3d& device_translation_m)
     // benchmarks' tool is exactly as wide as the bar, so the bar's long edges lie on the
     // tool's rim); a full second pass keeps those, since the obstacle's nodes there may lie
     // between the tool's. Judged rigidly: reference positions, the tool translated by d.
+    // Only where pass 1 holds that edge (both its corners in contact): a rim that lies exactly
+    // on the obstacle's own edge (a tool flush with a clamped end) has its nodes on the edge of
+    // the obstacle's faces, where pass 1 may miss them, and the obstacle's edge node is then
+    // all that holds the tool there. (Covered unconditionally, that node's contact came and
+    // went with which of the tool's faces at the rim corner the detector picked: a held pose
+    // cycled 608 -> 679 -> 82 N for ever; docs/free-interaction.md.)
+    auto slave = [&](int node) {
+      const int slot = tool_index[static_cast<std::size_t>(node)];
+      return slot >= 0 && tool_is_slave_[static_cast<std::size_t>(slot)] != 0;
+    };
     const Eigen::Vector3d rigid = ProjectionBarycentric(
         model_.obstacle().mesh().nodes_m.row(p.tool_node).transpose(),
         tool_reference.row(face.corners[0]).transpose() + device_translation_m,
@@ -463,7 +473,9 @@ void TwoBodySession::DetectContacts(const Eigen::Vector3d& device_translation_m)
     bool covered = false;
     if (!all_obstacle_nodes_are_slaves) {
       for (int k = 0; k < 3; ++k) {
-        covered = covered || (tool_surface_.sharp_edges[triangle][static_cast<std::size_t>(k)] && rigid[(k + 2) % 3] < kOnEdge);
+        covered = covered || (tool_surface_.sharp_edges[triangle][static_cast<std::size_t>(k)] &&
+                              rigid[(k + 2) % 3] < kOnEdge && slave(face.corners[static_cast<std::size_t>(k)]) &&
+                              slave(face.corners[static_cast<std::size_t>((k + 1) % 3)]));
       }
     }
     // On a tool node (corner or midside) that pass 1 holds, the same two material points would
