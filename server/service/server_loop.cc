@@ -180,6 +180,7 @@ ServerLoop::Client* ServerLoop::OpenSession(const std::string& client_id, const 
   try {
     Client client;
     client.last_heard_ns = MonotonicNowNs();
+    const int64_t creating_ns = client.last_heard_ns;
     client.session = std::make_unique<Session>(client_id, model, participant_, force_topic_, contact_topic_,
                                                options_.time_budget_s, options_.physics, options_.local_model,
                                                options_.server_id, options_.multirate);
@@ -187,8 +188,13 @@ ServerLoop::Client* ServerLoop::OpenSession(const std::string& client_id, const 
     auto [it, inserted] = sessions_.emplace(client_id, std::move(client));
     HAPCO_ASSERT(inserted, "OpenSession: session exists already");
     ++counters_.sessions_opened;
+    // (Its creation, a per-session copy of the scene's state and two DDS writers, took 157 ms
+    // on a stalled server: part of what a moving client waits.)
+    char created_in[48];
+    std::snprintf(created_in, sizeof created_in, ", created in %.1f ms)",
+                  static_cast<double>(MonotonicNowNs() - creating_ns) * 1e-6);
     Log(kLogSession, "session opened for '" + client_id + "' on scene " + model.scene().name + " (" +
-                         std::to_string(sessions_.size()) + " open)");
+                         std::to_string(sessions_.size()) + " open" + created_in);
     return &it->second;
   } catch (const std::exception& error) {
     Log(kLogFailure, "cannot open a session for '" + client_id + "': " + error.what());
@@ -318,6 +324,7 @@ void ServerLoop::ProcessSessionControls() {
       // (Its own device only: a second device under the id joining elsewhere ends nothing here.)
       if (control.command == hapco_idl_SESSION_JOIN && it != sessions_.end() && it->second.device == device) {
         ++counters_.sessions_moved_away;
+        moved_clients_[id] = {device, control.client_time_ns};
         CloseSession(it, "it joined server '" + ServerIdOf(control.server_id) + "'");
       }
       continue;
@@ -334,6 +341,7 @@ void ServerLoop::ProcessSessionControls() {
     switch (control.command) {
       case hapco_idl_SESSION_JOIN: {
         left_clients_.erase(id);
+        moved_clients_.erase(id);
         const std::string scene_name(control.scene_name, strnlen(control.scene_name, sizeof(control.scene_name)));
         const sim::TwoBodyModel* model = FindModel(scene_name);
         if (model == nullptr) {
@@ -445,6 +453,7 @@ void ServerLoop::ProcessPoses() {
       if (it != sessions_.end() && it->second.device == device && pose.server_id[0] != '\0' &&
           pose.client_time_ns > std::max(it->second.joined_client_time_ns, it->second.first_client_time_ns)) {
         ++counters_.sessions_moved_away;
+        moved_clients_[id] = {device, pose.client_time_ns};
         CloseSession(it, "it is served by '" + ServerIdOf(pose.server_id) + "' now");
       }
       continue;
@@ -454,6 +463,13 @@ void ServerLoop::ProcessPoses() {
       if (auto left = left_clients_.find(id); left != left_clients_.end() && left->second == device) {
         ++counters_.poses_after_leave;
         continue;  // in flight when the client left; not bad input
+      }
+      if (auto moved = moved_clients_.find(id); moved != moved_clients_.end() && moved->second.device == device) {
+        if (pose.client_time_ns <= moved->second.client_time_ns) {
+          ++counters_.poses_after_leave;
+          continue;  // sent before it moved away, late; not bad input
+        }
+        moved_clients_.erase(moved);  // it came back (a pose sent after it moved)
       }
       const PoseVerdict first = CheckStatelessPose(pose, options_.limits);
       if (first != PoseVerdict::kAccept) {

@@ -77,7 +77,7 @@ struct ServerCounters {
   uint64_t sessions_opened = 0;
   uint64_t sessions_closed = 0;
   uint64_t status_published = 0;
-  uint64_t poses_after_leave = 0;   // poses of a client that left, ignored until it joins again
+  uint64_t poses_after_leave = 0;   // poses of a client that left (until it joins again) or moved away (sent before)
   uint64_t parallel_batches = 0;    // ticks that stepped two or more sessions on the pool
   uint64_t burst_steps = 0;         // poses stepped after another of the same client in one tick
   uint64_t recovered_poses = 0;     // poses never received, stepped from a later pose's repeats
@@ -224,6 +224,15 @@ class ServerLoop {
   // poses still in flight must not reopen the session; another device's poses open one for it
   // (a second device under the id was stranded when the served one left; a helper session).
   std::map<std::string, DeviceId> left_clients_;
+  // Clients whose session here ended because they moved to another server (their JOIN or a
+  // pose addressed there): the device, and the client time of the message that said so. Its
+  // poses sent before that, addressed here and arriving late, must not open a new session (a
+  // helper session saw one opened and closed again at once, logged as a client that moved here).
+  struct MovedAway {
+    DeviceId device{};
+    int64_t client_time_ns = 0;
+  };
+  std::map<std::string, MovedAway> moved_clients_;
   std::unordered_map<dds_instance_handle_t, WriterIdentity> writer_identities_;  // writer -> its client and device
   std::atomic<bool> stop_{false};
   ServerCounters counters_;

@@ -73,6 +73,8 @@ Session::Session(std::string client_id, const sim::TwoBodyModel& model,
 
 bool Session::TryOpen(uint32_t recorders, int64_t now_ns, bool device_waiting) {
   if (open()) return true;
+  // (A pose received before this session was created is stamped earlier than its creation.)
+  now_ns = std::max(now_ns, created_ns_);
   const uint32_t matched = contact_writer_.MatchedReaders();
   // (A zero timeout only looks: the hello frame acknowledged by every matched reader.)
   if (matched >= recorders && readers_matched_ns_ < 0) readers_matched_ns_ = now_ns;

@@ -88,7 +88,8 @@ class Session {
   // died, or one that never waits for its session) is not kept waiting: with
   // `device_waiting` the session opens at once, acknowledged or not. Its recorders still get
   // the frames of its first kContactStateDepth steps (transient-local history); a recorder
-  // slower to find its writer misses the first steps, which hapco-report names as a gap.
+  // slower to find its writer misses the first steps (hapco-report: "lost at the start of a
+  // later session").
   // (Waiting for them cost a moved client 200-260 ms without a force on a loaded host, against
   // the failover budget of 100 ms after the client's timeout: CI 2026-12-07.) Returns open().
   bool TryOpen(uint32_t recorders, int64_t now_ns, bool device_waiting = false);

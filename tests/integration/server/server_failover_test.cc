@@ -346,6 +346,91 @@ TEST(ServerFailover, AKilledClientsSessionIsClosedWhenIdleAndItsSlotServesTheNex
   EXPECT_NE(log.find("sessions closed after --session-idle-s without a message 1"), std::string::npos) << log;
 }
 
+// A client that moved to another server: its poses sent before the move, addressed to the
+// server it left and arriving there late, open no session there (a helper session saw such a
+// pose open one, logged as "a client that moved here", closed again at once). A pose it sends
+// after the move, addressed here again, is a client coming back: served.
+TEST(ServerFailover, APoseSentBeforeAMoveAndArrivingLateOpensNoSession) {
+  const std::string dir = TestDir();
+  const dds_domainid_t domain = SetUpTestDomain();
+  Process server({HAPCO_SERVER_EXE, kScene, "--domain", std::to_string(domain), "--server-id", "s1",
+                  "--status-period-s", "0.05"},
+                 dir + "/server.out", dir + "/server.err");
+  Participant participant(domain);
+  Topic<hapco_idl_DevicePose> pose_topic(participant);
+  Topic<hapco_idl_SessionControl> session_topic(participant);
+  Topic<hapco_idl_FeedbackForce> force_topic(participant);
+  Topic<hapco_idl_ServerStatus> status_topic(participant);
+  Publisher publisher(participant, ClientPartition("mover"));
+  Subscriber client_subscriber(participant, ClientPartition("mover"));
+  Subscriber default_partition(participant);
+  Writer<hapco_idl_DevicePose> pose_writer(publisher, pose_topic);
+  Writer<hapco_idl_SessionControl> session_writer(publisher, session_topic);
+  Reader<hapco_idl_FeedbackForce> forces(client_subscriber, force_topic);
+  Reader<hapco_idl_ServerStatus> statuses(default_partition, status_topic, StatusQos());
+  ASSERT_TRUE(pose_writer.WaitForReaders(1, DDS_SECS(60))) << ReadFile(dir + "/server.err");
+  ASSERT_TRUE(session_writer.WaitForReaders(1, DDS_SECS(60)));
+
+  auto control = [&](hapco_idl_SessionCommand command, const char* server_id) {
+    hapco_idl_SessionControl c{};
+    SetClientId(c.client_id, "mover");
+    c.command = command;
+    std::snprintf(c.server_id, sizeof c.server_id, "%s", server_id);
+    c.client_time_ns = MonotonicNowNs();
+    ASSERT_EQ(session_writer.Write(c), DDS_RETCODE_OK);
+  };
+  hapco_idl_DevicePose pose{};
+  SetClientId(pose.client_id, "mover");
+  std::snprintf(pose.server_id, sizeof pose.server_id, "s1");
+  pose.orientation = {1, 0, 0, 0};
+  uint64_t sequence = 0;
+  // Writes poses (client time `client_time_ns`, 0: now) until a force answers one, at most
+  // `attempts` times 50 ms. True when one did.
+  auto answered = [&](int64_t client_time_ns, int attempts) {
+    hapco_idl_FeedbackForce force{};
+    for (int k = 0; k < attempts; ++k) {
+      pose.sequence_number = ++sequence;
+      pose.client_time_ns = client_time_ns != 0 ? client_time_ns : MonotonicNowNs();
+      EXPECT_EQ(pose_writer.Write(pose), DDS_RETCODE_OK);
+      if (!forces.WaitForData(DDS_MSECS(50))) continue;
+      while (forces.Take(&force)) {
+        if (force.pose_verdict == hapco_idl_POSE_STEPPED) return true;
+      }
+    }
+    return false;
+  };
+  auto sessions_become = [&](uint32_t count) {
+    hapco_idl_ServerStatus status{};
+    for (const dds_time_t deadline = dds_time() + DDS_SECS(30); dds_time() < deadline;) {
+      if (!statuses.WaitForData(DDS_MSECS(100))) continue;
+      while (statuses.Take(&status)) {
+        if (status.sessions == count) return true;
+      }
+    }
+    return false;
+  };
+  control(hapco_idl_SESSION_JOIN, "s1");
+  ASSERT_TRUE(answered(0, 600)) << ReadFile(dir + "/server.err");
+  const int64_t before_move_ns = MonotonicNowNs();  // the late poses' send time
+  control(hapco_idl_SESSION_JOIN, "s2");            // it moves to s2
+  ASSERT_TRUE(sessions_become(0)) << ReadFile(dir + "/server.err");
+  // Poses sent before the move, arriving now: none answered, no session.
+  EXPECT_FALSE(answered(before_move_ns, 20)) << ReadFile(dir + "/server.err");
+  ASSERT_TRUE(sessions_become(0));
+  // It comes back (a pose sent now, addressed here): served, the server still listening.
+  EXPECT_TRUE(answered(0, 600)) << ReadFile(dir + "/server.err");
+  server.Signal(SIGTERM);
+  ASSERT_EQ(server.Wait(30'000), 0);
+  const std::string log = ReadFile(dir + "/server.err");
+  int opened = 0;
+  for (std::size_t at = log.find("session opened for 'mover'"); at != std::string::npos;
+       at = log.find("session opened for 'mover'", at + 1)) {
+    ++opened;
+  }
+  EXPECT_EQ(opened, 2) << log;  // the first join and the return, nothing between
+  EXPECT_NE(log.find("session closed for 'mover': it joined server 's2'"), std::string::npos) << log;
+}
+
 // Several servers on one domain (docs/several-servers.md): three servers, four clients that
 // choose their server from the announcements. Each client is answered by one server only; when
 // the server with the most clients is killed, each of its clients moves to another server and

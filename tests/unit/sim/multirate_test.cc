@@ -196,6 +196,31 @@ TEST(Multirate, ApartTheAnswerIsZeroOnlyWhereAStepGivesZero) {
   EXPECT_GT(apart, 20);
 }
 
+// Pressed 2 mm and slid off the side of the bar (its long side face at y = 20 mm): where the
+// undeformed tool is clear of the bar, a step gives exactly zero (TwoBodySession::Release), and
+// so does every answer between steps. (The last step's contacts, solved again at a clear pose,
+// kept 7.3 N on benchmark 1 with K = 4, and kN after a push into a clamped end: a helper
+// session.)
+TEST(Multirate, AToolClearOfTheBarIsAnsweredZeroBetweenSteps) {
+  const TwoBodyModel model(testing::CoarseTestScene(0.0));
+  const auto path = PolylinePath({{0, 0, 0.0005}, {0, 0, -0.002}, {0, 0.024, -0.002}}, 1e-4);
+  const std::vector<Eigen::Vector3d> reference = EveryPose(model, path);
+  const Answers answers = AnswerAll(model, path, 4);
+  int clear = 0;
+  std::vector<int> stack;
+  double pressed_n = 0.0;
+  for (std::size_t k = 0; k < path.size(); ++k) {
+    pressed_n = std::max(pressed_n, reference[k].norm());
+    if (!model.RigidToolClearOfObstacle(path[k], &stack)) continue;
+    ++clear;
+    EXPECT_TRUE(reference[k].isZero()) << "pose " << k << ": a step gives " << reference[k].transpose();
+    EXPECT_TRUE(answers.force_n[k].isZero()) << "pose " << k << " (" << AnswerSourceName(answers.source[k])
+                                             << "): " << answers.force_n[k].transpose();
+  }
+  EXPECT_GT(pressed_n, 1.0);
+  EXPECT_GT(clear, 10);
+}
+
 TEST(Multirate, AStepComesWithinKPosesAndTheModelDistanceAndAtEveryTurn) {
   const TwoBodyModel model(testing::CoarseTestScene(0.3));
   const auto path = FreePath();
