@@ -78,6 +78,7 @@ ServerLoop::ServerLoop(std::vector<const sim::TwoBodyModel*> models, dds_domaini
   step_times_us_.reserve(8192);
   stepping_.reserve(static_cast<std::size_t>(options_.max_sessions));
   start_ns_ = MonotonicNowNs();
+  if (dds_get_instance_handle(status_writer_.handle(), &own_status_handle_) != DDS_RETCODE_OK) own_status_handle_ = 0;
 }
 
 ServerLoop::~ServerLoop() {
@@ -623,7 +624,18 @@ void ServerLoop::ReadPeerStatus() {
   while (peer_status_reader_ && peer_status_reader_->Take(&status, &info)) {
     if (!info.valid_data) continue;
     ServerAnnouncement a = AnnouncementOf(status, now);
-    if (a.server_id == options_.server_id || a.server_id.empty()) continue;  // its own, or nameless
+    if (a.server_id == options_.server_id) {
+      // Its own (the reader sees this participant's writer too), or another server's under the
+      // same id.
+      if (own_status_handle_ != 0 && info.publication_handle != own_status_handle_) {
+        // Its uptime now: the announced one plus the sample's age (a transient-local sample
+        // may be a status period old; clocks of one host, or synchronised ones).
+        const int64_t age_ns = std::max<int64_t>(0, dds_time() - info.source_timestamp);
+        OnDuplicateServerId(status.uptime_ns + age_ns, now);
+      }
+      continue;
+    }
+    if (a.server_id.empty()) continue;  // nameless
     auto known = std::find_if(peers_.begin(), peers_.end(),
                               [&a](const ServerAnnouncement& p) { return p.server_id == a.server_id; });
     if (known != peers_.end()) {
@@ -634,6 +646,28 @@ void ServerLoop::ReadPeerStatus() {
   }
   // A peer is live while its status keeps coming: three of its periods (1 s by default).
   serves_unaddressed_ = ServesUnaddressed(options_.server_id, peers_, now, kPeerMaxAgeNs);
+}
+
+void ServerLoop::OnDuplicateServerId(int64_t other_uptime_ns, int64_t now_ns) {
+  // The older server keeps the id; the newer stops (both stop when they started within 50 ms
+  // of each other): its uptime is known to a delivery latency, so compared with a margin.
+  constexpr int64_t kTieNs = 50'000'000;
+  const int64_t own_uptime_ns = now_ns - start_ns_;
+  char apart[96];  // how long before (+) or after (-) this one the other started
+  std::snprintf(apart, sizeof apart, "%.2f s", std::abs(static_cast<double>(other_uptime_ns - own_uptime_ns)) * 1e-9);
+  if (other_uptime_ns + kTieNs >= own_uptime_ns) {
+    if (stopped_because_.empty()) {
+      stopped_because_ = "another server on this domain already announces --server-id '" + options_.server_id +
+                         "' (it started " + apart + (other_uptime_ns >= own_uptime_ns ? " before" : " after") +
+                         " this one): two servers with one id would both answer its clients; give each server its "
+                         "own --server-id (or leave it out for a unique default)";
+      Log(kLogFailure, stopped_because_ + "; stopping");
+      RequestStop();
+    }
+  } else {
+    Log(kLogFailure, "another server on this domain announces this server's --server-id '" + options_.server_id +
+                         "' (it started " + apart + " after this one): it stops, this one keeps serving");
+  }
 }
 
 bool ServerLoop::AddressedToMe(const char (&field)[65]) const {

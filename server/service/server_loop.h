@@ -113,6 +113,11 @@ class ServerLoop {
   std::size_t sessions() const { return sessions_.size(); }
   // "hapco-server: ... steps, ... sessions, counters ..." (one line).
   std::string Summary() const;
+  // Why Run() stopped on its own, "" if it did not: another live server on the domain
+  // announces this server's --server-id and started before it (or within 50 ms of it). Both
+  // would answer the clients addressed to that id (a helper session: every pose of a client
+  // stepped twice, its recording 1 516 sessions), so the newer one stops.
+  const std::string& stopped_because() const { return stopped_because_; }
 
  private:
   static constexpr int kMaxQueuedPoses = PendingPoses::kCapacity;
@@ -243,6 +248,11 @@ class ServerLoop {
   std::vector<Client*> stepping_;   // the sessions stepped in this batch (capacity max_sessions)
   std::array<hapco_idl_DevicePose, hapco_idl_RECENT_SAMPLES> missed_{};  // RecoverMissedPoses scratch
   int64_t start_ns_ = 0;
+  dds_instance_handle_t own_status_handle_ = 0;  // this server's status writer, to tell its own samples
+  std::string stopped_because_;
+  // A ServerStatus with this server's id from another writer (ReadPeerStatus), whose server
+  // has been up other_uptime_ns.
+  void OnDuplicateServerId(int64_t other_uptime_ns, int64_t now_ns);
   int64_t last_status_ns_ = 0, last_status_cpu_ns_ = 0;  // for ServerStatus.cpu_use
   std::vector<TokenBucket> log_buckets_;  // per log kind (Log)
   std::vector<uint64_t> suppressed_logs_;

@@ -431,6 +431,43 @@ TEST(ServerFailover, APoseSentBeforeAMoveAndArrivingLateOpensNoSession) {
   EXPECT_NE(log.find("session closed for 'mover': it joined server 's2'"), std::string::npos) << log;
 }
 
+// Two servers started with one --server-id on one domain would both answer the clients
+// addressed to it (a helper session: every pose stepped twice, the recording 1 516 sessions).
+// The one started later stops with exit code 1 and says why; the first keeps serving.
+TEST(ServerFailover, ASecondServerWithTheSameIdStopsAndSaysWhy) {
+  const std::string dir = TestDir();
+  const dds_domainid_t domain_id = SetUpTestDomain();
+  const std::string domain = std::to_string(domain_id);
+  Participant participant(domain_id);
+  Topic<hapco_idl_ServerStatus> status_topic(participant);
+  Subscriber default_partition(participant);
+  Reader<hapco_idl_ServerStatus> statuses(default_partition, status_topic, StatusQos());
+  Process first({HAPCO_SERVER_EXE, kScene, "--domain", domain, "--server-id", "twin", "--status-period-s", "0.1"},
+                dir + "/first.out", dir + "/first.err");
+  hapco_idl_ServerStatus status{};
+  bool announced = false;
+  for (const dds_time_t deadline = dds_time() + DDS_SECS(60); !announced && dds_time() < deadline;) {
+    if (statuses.WaitForData(DDS_MSECS(200))) announced = statuses.Take(&status);
+  }
+  ASSERT_TRUE(announced) << ReadFile(dir + "/first.err");
+  Process second({HAPCO_SERVER_EXE, kScene, "--domain", domain, "--server-id", "twin"}, dir + "/second.out",
+                 dir + "/second.err");
+  EXPECT_EQ(second.Wait(60'000), 1) << ReadFile(dir + "/second.err");
+  EXPECT_NE(ReadFile(dir + "/second.err").find("already announces --server-id 'twin'"), std::string::npos)
+      << ReadFile(dir + "/second.err");
+  EXPECT_NE(ReadFile(dir + "/second.out").find("stopped by a duplicate --server-id"), std::string::npos);
+  // The first still serves: it announces itself after the second has gone, and stops cleanly.
+  while (statuses.Take(&status)) {
+  }
+  ASSERT_TRUE(statuses.WaitForData(DDS_SECS(30)));
+  ASSERT_TRUE(statuses.Take(&status));
+  EXPECT_STREQ(status.server_id, "twin");
+  first.Signal(SIGTERM);
+  ASSERT_EQ(first.Wait(30'000), 0) << ReadFile(dir + "/first.err");
+  EXPECT_NE(ReadFile(dir + "/first.err").find("it stops, this one keeps serving"), std::string::npos)
+      << ReadFile(dir + "/first.err");
+}
+
 // Several servers on one domain (docs/several-servers.md): three servers, four clients that
 // choose their server from the announcements. Each client is answered by one server only; when
 // the server with the most clients is killed, each of its clients moves to another server and
