@@ -34,8 +34,7 @@ Several scenes: a SESSION_JOIN names its scene (the scene file's `name`; hapco-p
 Bad input is counted and logged (at most one line per second per kind), never fatal; a client whose poses are ignored is told so in its force samples (FeedbackForce.pose_verdict). Guide: docs/haptic-service.md.)";
 
 constexpr const char* kFooter = R"(SIGINT/SIGTERM: clean shutdown, exit code 0 and a one-line summary.
-Exit code: 0 after a clean shutdown, 1 on bad input (scene file, flags; also when another server on
-the domain already uses this --server-id), 3 on a DDS failure.)";
+Exit code: 0 after a clean shutdown, 1 on bad input (scene file, flags; also when another server on the domain already uses this --server-id), 3 on a DDS failure.)";
 
 struct Options {
   std::vector<std::string> scene_paths;  // the first is the default scene
