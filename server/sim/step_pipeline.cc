@@ -512,14 +512,31 @@ const StepOutput& TwoBodySession::Step(const Eigen::Vector3d& device_translation
   if (!approaching()) {
     if (output_.step > 0 || device_translation_m.norm() <= kDirectFirstStepM ||
         !model_.ToolInsideObstacle(device_translation_m)) {
-      return StepOnce(device_translation_m);
+      const bool had_contacts = output_.num_contacts > 0;
+      StepOnce(device_translation_m);
+      // Its last contacts lost with the tool inside the obstacle: passed into it. Driven far
+      // outside small strain (in from the side below the top and on into the bar, bending it
+      // sideways by 15-20 mm; along a clamped end 5 mm deep), the deformed configuration the
+      // detection works on no longer meets the tool, and the tool then sat 4 mm inside
+      // benchmark 1's bar with 0 N for hundreds of steps (random paths, 2026-12-07). It
+      // re-enters as a session opened there does: an approach from above (StartApproach).
+      // (ToolInsideObstacle, ~0.3 ms, only on the step that lost the last contact.)
+      if (!(had_contacts && output_.num_contacts == 0) || model_.approach_normal().isZero() ||
+          !model_.ToolInsideObstacle(device_translation_m)) {
+        return output_;
+      }
+      output_.step -= 1;  // ContinueApproach counts this call's step
+      StartApproach(device_translation_m, /*from_above=*/true);
+      ContinueApproach(device_translation_m);
+      output_.reentered = true;
+      return output_;
     }
     StartApproach(device_translation_m);
   }
   return ContinueApproach(device_translation_m);
 }
 
-void TwoBodySession::StartApproach(const Eigen::Vector3d& device_translation_m) {
+void TwoBodySession::StartApproach(const Eigen::Vector3d& device_translation_m, bool from_above) {
   // Where the device came from is unknown. The approach presses in along the start's contact
   // normal n, as a user meets a surface: lift 1 mm off it, move across above it, press to the
   // pose (with friction; a straight line from home dragged the tool sideways into the bar and
@@ -528,6 +545,14 @@ void TwoBodySession::StartApproach(const Eigen::Vector3d& device_translation_m) 
   constexpr double kLiftM = 1e-3;
   const Eigen::Vector3d& n = model_.approach_normal();
   approach_ = Approach{};
+  if (from_above) {
+    // The tool taken out, undeformed, to 1 mm above the pose along n, then pressed in.
+    device_translation_m_ = device_translation_m - n * n.dot(device_translation_m) + kLiftM * n;
+    Release();
+    approach_.at_m = device_translation_m_;
+    approach_.waypoints[static_cast<std::size_t>(approach_.num_waypoints++)] = device_translation_m;
+    return;
+  }
   approach_.at_m = device_translation_m_;
   if (n.norm() > 0) {
     const Eigen::Vector3d across = device_translation_m - n * n.dot(device_translation_m);

@@ -97,6 +97,10 @@ struct StepOutput {
   // contacts: their state (forces, both bodies' deformation) was dropped before this step
   // (TwoBodySession::Release).
   bool released = false;
+  // The step lost its last contacts with the tool inside the obstacle (passed into it): the
+  // session re-enters by an approach from above (TwoBodySession::Step), `approaching` until
+  // it reaches the device's pose.
+  bool reentered = false;
   double detect_seconds = 0.0;    // broad phase (incl. the obstacle displacement there) + both passes
   double assemble_seconds = 0.0;  // ũ and W
   double solve_seconds = 0.0;
@@ -183,7 +187,9 @@ class TwoBodySession {
     int next = 0;
     Eigen::Vector3d at_m = Eigen::Vector3d::Zero();
   };
-  void StartApproach(const Eigen::Vector3d& device_translation_m);
+  // from_above: mid-session, the tool passed into the obstacle (Step): it starts 1 mm above
+  // the pose along the approach normal, undeformed, and presses in.
+  void StartApproach(const Eigen::Vector3d& device_translation_m, bool from_above = false);
   const StepOutput& ContinueApproach(const Eigen::Vector3d& device_translation_m);
   void BroadPhase(const Eigen::Vector3d& increment_m);
   // U = C f of the last forces on the region slots (kPrecomputed).

@@ -403,6 +403,7 @@ int Run(const Options& options) {
   int not_converged = 0;
   int out_of_range = 0;  // steps that needed a node pair beyond a banded compliance
   int releases = 0;      // steps that dropped a loaded contact state: the tool lifted clear (StepOutput::released)
+  int reentries = 0;     // steps that lost the last contact inside the obstacle (StepOutput::reentered)
   double peak_force_n = 0;
   long total_iterations = 0;
   hapco::Stopwatch run;
@@ -477,6 +478,7 @@ int Run(const Options& options) {
     if (out.status != hapco::contact::SolverStatus::kConverged) ++not_converged;
     if (out.compliance_out_of_range) ++out_of_range;
     if (out.released) ++releases;
+    if (out.reentered) ++reentries;
     peak_force_n = std::max(peak_force_n, out.contact_force_n.norm());
     total_iterations += out.iterations;
     if (csv != nullptr) {
@@ -533,6 +535,12 @@ int Run(const Options& options) {
                 "state was dropped (the linear model's bent state after a push far into a rigid face would hold "
                 "itself there; docs/free-interaction.md)\n",
                 releases);
+  }
+  if (reentries > 0) {
+    std::printf("the tool lost its last contact while inside the obstacle %d times (driven far past small strain, "
+                "e.g. in from a side below the top): each time it re-entered by an approach from above, as a session "
+                "opened there does (docs/free-interaction.md)\n",
+                reentries);
   }
   if (model.obstacle_surface().range_axis >= 0) {
     std::printf("compliance range %.3g m: %d steps needed a node pair beyond it%s\n", model.obstacle_surface().range_m,
