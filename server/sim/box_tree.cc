@@ -16,6 +16,7 @@ StaticBoxTree::StaticBoxTree(const std::vector<Eigen::Vector3d>& min_m, const st
   order_.resize(min_m.size());
   for (std::size_t i = 0; i < order_.size(); ++i) order_[i] = static_cast<int>(i);
   if (!order_.empty()) depth_ = Build(0, static_cast<int>(order_.size()), 1);
+  HAPCO_ASSERT(depth_ <= kMaxDepth, "StaticBoxTree: deeper than AnyContaining's stack");
 }
 
 int StaticBoxTree::Build(int begin, int end, int depth) {

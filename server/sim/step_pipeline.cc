@@ -520,7 +520,7 @@ const StepOutput& TwoBodySession::Step(const Eigen::Vector3d& device_translation
       // detection works on no longer meets the tool, and the tool then sat 4 mm inside
       // benchmark 1's bar with 0 N for hundreds of steps (random paths, 2026-12-07). It
       // re-enters as a session opened there does: an approach from above (StartApproach).
-      // (ToolInsideObstacle, ~0.3 ms, only on the step that lost the last contact.)
+      // (ToolInsideObstacle, at most a few us, only on the step that lost the last contact.)
       if (!(had_contacts && output_.num_contacts == 0) || model_.approach_normal().isZero() ||
           !model_.ToolInsideObstacle(device_translation_m)) {
         return output_;

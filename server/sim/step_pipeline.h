@@ -142,7 +142,11 @@ class TwoBodySession {
   // about two contact steps each (kApproachBudget), so sessions sharing a stepping thread are
   // not held up (all at once it held the thread for 30-40 ms for 12 mm); each call answers the
   // force at the pose the approach has reached (StepOutput::approaching), rising as it presses
-  // in, until it reaches the device's pose. Calls count one `step` each.
+  // in, until it reaches the device's pose. Calls count one `step` each. Later in a session,
+  // a step that loses its last contact with the tool inside the obstacle (a path far past
+  // small strain: the deformed configuration no longer meets the tool) re-enters the same way,
+  // from 1 mm above the pose (StepOutput::reentered). And a step whose undeformed tool is clear
+  // of the obstacle drops the last contacts' state first (StepOutput::released).
   const StepOutput& Step(const Eigen::Vector3d& device_translation_m);
   // An approach (above) is still on its way to the device's pose.
   bool approaching() const { return approach_.num_waypoints > 0; }

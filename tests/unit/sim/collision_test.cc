@@ -626,6 +626,21 @@ TEST(StaticBoxTreeTest, OverlapQueriesMatchATestOfEveryBox) {
     EXPECT_EQ(hits, expected) << "query " << query;
     total += expected.size();
     EXPECT_LE(stack.capacity(), static_cast<std::size_t>(tree.depth()) + 1);  // never grew
+    // AnyOverlapping and, for a point, AnyContaining (visiting every box that holds it) say
+    // the same as the full query.
+    EXPECT_EQ(tree.AnyOverlapping(a, b, &stack), !expected.empty()) << "query " << query;
+    if (query % 2 == 1) {
+      std::vector<int> visited;
+      EXPECT_FALSE(tree.AnyContaining(a, [&](int id) {
+        visited.push_back(id);
+        return false;
+      }));
+      std::sort(visited.begin(), visited.end());
+      EXPECT_EQ(visited, expected) << "query " << query;
+      if (!expected.empty()) {
+        EXPECT_TRUE(tree.AnyContaining(a, [&](int id) { return id == expected.back(); }));
+      }
+    }
   }
   EXPECT_GT(total, 200u);
   // Touching counts (closed boxes): the query [hi, hi] of a box finds it.
