@@ -348,9 +348,13 @@ std::string PhantomClient::ChooseServer(const std::string& avoid) {
       .value_or(std::string());
 }
 
-bool PhantomClient::ServerLeaseLapsedAndTrusted(const std::string& server_id, int64_t now_ns) {
+bool PhantomClient::ServerLeaseLapsedAndTrusted(const std::string& server_id, int64_t now_ns,
+                                                 bool silent_twice_timeout) {
   std::lock_guard<std::mutex> lock(dds_->servers_mutex);
-  if (dds_->last_lease_regained_ns >= 0 && now_ns - dds_->last_lease_regained_ns < kLeaseDistrustNs) return false;
+  if (!silent_twice_timeout && dds_->last_lease_regained_ns >= 0 &&
+      now_ns - dds_->last_lease_regained_ns < kLeaseDistrustNs) {
+    return false;
+  }
   for (const service::ServerAnnouncement& s : dds_->servers) {
     if (s.server_id == server_id) return s.lease_lapsed;
   }
@@ -632,7 +636,10 @@ void PhantomClient::Run(const std::atomic<bool>& stop, const std::function<void(
                           now - last_move_ns >= kMinMoveIntervalNs;
     const bool silent_long = last_force_arrival_ns < 0 || static_cast<double>(now - last_force_arrival_ns) >= move_after_ns;
     // (The lease is read under the server list's lock: only while stale, not on every tick.)
-    const bool lease_lapsed = may_move && !silent_long && ServerLeaseLapsedAndTrusted(server_id_, now);
+    const bool silent_twice_timeout =
+        last_force_arrival_ns >= 0 && now - last_force_arrival_ns >= 2 * static_cast<int64_t>(timeout_ns);
+    const bool lease_lapsed =
+        may_move && !silent_long && ServerLeaseLapsedAndTrusted(server_id_, now, silent_twice_timeout);
     if (may_move && (silent_long || lease_lapsed)) {
       last_move_try_ns = now;
       const std::string next = ChooseServer(server_id_);
