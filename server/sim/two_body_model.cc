@@ -572,8 +572,8 @@ bool TwoBodyModel::ToolInsideObstacle(const Eigen::Vector3d& device_translation_
 bool TwoBodyModel::RigidToolClearOfObstacle(const Eigen::Vector3d& device_translation_m, std::vector<int>* stack) const {
   const Eigen::Vector3d lo = tool_lo_m_ + device_translation_m, hi = tool_hi_m_ + device_translation_m;
   if (obstacle_surface_.triangle_tree.AnyOverlapping(lo, hi, stack)) return false;
-  // No face near: wholly outside, or wholly inside (one node tells; brute force, but only
-  // inside the obstacle's box, where a tool that meets no face is rare).
+  // No face near: wholly outside, or wholly inside (one node tells: a tree query, and only
+  // inside the obstacle's box).
   return tool_surface_.nodes.empty() ||
          !obstacle_locator_.Contains(Position(tool_.mesh(), tool_surface_.nodes.front()) + device_translation_m);
 }
