@@ -108,7 +108,8 @@ struct PhantomClient::Dds {
   void OnLivelinessChanged(const dds_liveliness_changed_status_t& status) {
     {
       std::lock_guard<std::mutex> lock(servers_mutex);
-      switch (service::ApplyLivelinessChange(servers, status.last_publication_handle, status.alive_count_change)) {
+      switch (service::ApplyLivelinessChange(servers, status.last_publication_handle, status.alive_count_change,
+                                             MonotonicNowNs())) {
         case service::LeaseChange::kLapsed: ++leases_lapsed; break;
         case service::LeaseChange::kRegained:
           ++leases_regained;
@@ -349,14 +350,17 @@ std::string PhantomClient::ChooseServer(const std::string& avoid) {
 }
 
 bool PhantomClient::ServerLeaseLapsedAndTrusted(const std::string& server_id, int64_t now_ns,
-                                                 bool silent_twice_timeout) {
+                                                 bool silent_twice_timeout, int64_t last_force_ns) {
   std::lock_guard<std::mutex> lock(dds_->servers_mutex);
   if (!silent_twice_timeout && dds_->last_lease_regained_ns >= 0 &&
       now_ns - dds_->last_lease_regained_ns < kLeaseDistrustNs) {
     return false;
   }
   for (const service::ServerAnnouncement& s : dds_->servers) {
-    if (s.server_id == server_id) return s.lease_lapsed;
+    if (s.server_id != server_id) continue;
+    // Silent for twice the timeout: a lapse since the last force counts even if the lease
+    // came back since (LeaseLapsedSince).
+    return silent_twice_timeout ? service::LeaseLapsedSince(s, last_force_ns) : s.lease_lapsed;
   }
   return false;
 }
@@ -639,7 +643,8 @@ void PhantomClient::Run(const std::atomic<bool>& stop, const std::function<void(
     const bool silent_twice_timeout =
         last_force_arrival_ns >= 0 && now - last_force_arrival_ns >= 2 * static_cast<int64_t>(timeout_ns);
     const bool lease_lapsed =
-        may_move && !silent_long && ServerLeaseLapsedAndTrusted(server_id_, now, silent_twice_timeout);
+        may_move && !silent_long &&
+        ServerLeaseLapsedAndTrusted(server_id_, now, silent_twice_timeout, last_force_arrival_ns);
     if (may_move && (silent_long || lease_lapsed)) {
       last_move_try_ns = now;
       const std::string next = ChooseServer(server_id_);

@@ -180,8 +180,10 @@ class PhantomClient {
   // True while the DDS liveliness lease of `server_id`'s announcements has lapsed (the
   // process is gone or frozen; qos.h kServerLivelinessLeaseNs) and lapses can be trusted: no
   // server's lease has lapsed and come back within kLeaseDistrustNs, or `silent_twice_timeout`
-  // (no force for twice the safety timeout). Locks the server list.
-  bool ServerLeaseLapsedAndTrusted(const std::string& server_id, int64_t now_ns, bool silent_twice_timeout);
+  // (no force for twice the safety timeout; then a lapse after `last_force_ns` counts even if
+  // the lease came back since: service::LeaseLapsedSince). Locks the server list.
+  bool ServerLeaseLapsedAndTrusted(const std::string& server_id, int64_t now_ns, bool silent_twice_timeout,
+                                   int64_t last_force_ns);
   // A lease that lapsed and came back means a host or network that stalls 50 ms at a time;
   // for this long after, a lapse alone is not taken as a death: it takes a lapse and twice
   // the timeout without a force (or the round-trip rule). With the lapse ignored outright, a

@@ -65,16 +65,21 @@ ServerAnnouncement AnnouncementOf(const hapco_idl_ServerStatus& status, int64_t 
 }
 
 LeaseChange ApplyLivelinessChange(std::span<ServerAnnouncement> servers, uint64_t writer_handle,
-                                  int32_t alive_count_change) {
+                                  int32_t alive_count_change, int64_t now_ns) {
   if (writer_handle == 0 || alive_count_change == 0) return LeaseChange::kNone;
   for (ServerAnnouncement& s : servers) {
     if (s.writer_handle != writer_handle) continue;
     const bool lapsed = alive_count_change < 0;
     if (s.lease_lapsed == lapsed) return LeaseChange::kNone;
     s.lease_lapsed = lapsed;
+    if (lapsed) s.lapsed_ns = now_ns;
     return lapsed ? LeaseChange::kLapsed : LeaseChange::kRegained;
   }
   return LeaseChange::kNone;
+}
+
+bool LeaseLapsedSince(const ServerAnnouncement& server, int64_t since_ns) {
+  return server.lease_lapsed || (server.lapsed_ns >= 0 && server.lapsed_ns > since_ns);
 }
 
 LeaseChange RecordAnnouncement(std::vector<ServerAnnouncement>& servers, ServerAnnouncement announcement,
@@ -87,7 +92,9 @@ LeaseChange RecordAnnouncement(std::vector<ServerAnnouncement>& servers, ServerA
     return LeaseChange::kNone;
   }
   const bool was_lapsed = known->lease_lapsed;
+  const int64_t lapsed_ns = known->lapsed_ns;
   *known = std::move(announcement);  // its data came: alive (lease_lapsed false)
+  known->lapsed_ns = lapsed_ns;
   return was_lapsed ? LeaseChange::kRegained : LeaseChange::kNone;
 }
 

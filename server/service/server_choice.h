@@ -35,6 +35,10 @@ struct ServerAnnouncement {
   // process is gone (killed, crashed) or frozen. Not chosen, not live; a new announcement or
   // the lease coming back clears it.
   bool lease_lapsed = false;
+  // CLOCK_MONOTONIC of the receiver when that lease last lapsed (-1: never), kept when it comes
+  // back: a lapse and a return within one silence of the server still says it stalled or died
+  // (LeaseLapsedSince).
+  int64_t lapsed_ns = -1;
 };
 
 // The announcement in a ServerStatus sample (scene_names split at commas).
@@ -48,9 +52,17 @@ enum class LeaseChange {
 };
 
 // Applies a liveliness change of the status writer `writer_handle` (DDS on_liveliness_changed:
-// alive_count_change < 0 lapsed, > 0 alive again) to the server it announced.
+// alive_count_change < 0 lapsed, > 0 alive again), seen at now_ns (CLOCK_MONOTONIC), to the
+// server it announced.
 LeaseChange ApplyLivelinessChange(std::span<ServerAnnouncement> servers, uint64_t writer_handle,
-                                  int32_t alive_count_change);
+                                  int32_t alive_count_change, int64_t now_ns);
+
+// The server's lease is lapsed now, or lapsed after since_ns (CLOCK_MONOTONIC) and came back.
+// Why the second: a client whose own DDS receive thread stalls sees a dead server's lease lapse,
+// then "come back" when the packets the server sent before it died are read late, then lapse
+// again 50 ms later; in between the lapse was not visible and the client waited for the
+// round-trip rule (160.5 ms without a force in CI, several_servers_in_namespaces, 2026-12-07).
+bool LeaseLapsedSince(const ServerAnnouncement& server, int64_t since_ns);
 
 // Records a new announcement (a ServerStatus sample) among `servers` (at most `max_servers`
 // kept). Returns kRegained when it replaces the announcement of a server whose lease had

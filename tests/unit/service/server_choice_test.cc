@@ -55,7 +55,7 @@ TEST(ChooseServer, AServerWhoseLeaseLapsedIsNeitherChosenNorLiveUntilItIsAliveAg
   EXPECT_FALSE(ServesUnaddressed("b-busy", servers, kNow, kMaxAge));  // "a-dead" has the smaller id
   // Its status writer's lease lapsed (killed): it is not chosen, even as the only other
   // server when the client leaves "b-busy", and the next id serves unaddressed poses.
-  EXPECT_EQ(ApplyLivelinessChange(servers, 11, -1), LeaseChange::kLapsed);
+  EXPECT_EQ(ApplyLivelinessChange(servers, 11, -1, kNow), LeaseChange::kLapsed);
   EXPECT_TRUE(servers[0].lease_lapsed);
   EXPECT_FALSE(servers[1].lease_lapsed);
   EXPECT_EQ(ChooseServer(servers, "c", "bench1", "", kNow, kMaxAge), "b-busy");
@@ -63,12 +63,12 @@ TEST(ChooseServer, AServerWhoseLeaseLapsedIsNeitherChosenNorLiveUntilItIsAliveAg
   EXPECT_TRUE(ServesUnaddressed("b-busy", servers, kNow, kMaxAge));
   // A writer no announcement came from changes nothing; no change, or a repeated lapse,
   // changes nothing.
-  EXPECT_EQ(ApplyLivelinessChange(servers, 99, +1), LeaseChange::kNone);
-  EXPECT_EQ(ApplyLivelinessChange(servers, 11, 0), LeaseChange::kNone);
-  EXPECT_EQ(ApplyLivelinessChange(servers, 11, -1), LeaseChange::kNone);
+  EXPECT_EQ(ApplyLivelinessChange(servers, 99, +1, kNow), LeaseChange::kNone);
+  EXPECT_EQ(ApplyLivelinessChange(servers, 11, 0, kNow), LeaseChange::kNone);
+  EXPECT_EQ(ApplyLivelinessChange(servers, 11, -1, kNow), LeaseChange::kNone);
   EXPECT_EQ(ChooseServer(servers, "c", "bench1", "", kNow, kMaxAge), "b-busy");
   // Alive again (a frozen process that resumed): chosen again.
-  EXPECT_EQ(ApplyLivelinessChange(servers, 11, +1), LeaseChange::kRegained);
+  EXPECT_EQ(ApplyLivelinessChange(servers, 11, +1, kNow), LeaseChange::kRegained);
   EXPECT_EQ(ChooseServer(servers, "c", "bench1", "", kNow, kMaxAge), "a-dead");
 }
 
@@ -78,19 +78,41 @@ TEST(ChooseServer, AServerWhoseLeaseLapsedIsNeitherChosenNorLiveUntilItIsAliveAg
 TEST(ChooseServer, AnAnnouncementFromALapsedServerEndsTheLapseOnce) {
   std::vector<ServerAnnouncement> servers = {Server("a", 0)};
   servers[0].writer_handle = 11;
-  ASSERT_EQ(ApplyLivelinessChange(servers, 11, -1), LeaseChange::kLapsed);
+  ASSERT_EQ(ApplyLivelinessChange(servers, 11, -1, kNow), LeaseChange::kLapsed);
   ServerAnnouncement again = Server("a", 1);
   again.writer_handle = 21;  // rediscovered: another handle
-  EXPECT_EQ(ApplyLivelinessChange(servers, 21, +1), LeaseChange::kNone) << "the new writer was never known";
+  EXPECT_EQ(ApplyLivelinessChange(servers, 21, +1, kNow), LeaseChange::kNone) << "the new writer was never known";
   EXPECT_EQ(RecordAnnouncement(servers, again, 256), LeaseChange::kRegained);
   EXPECT_FALSE(servers[0].lease_lapsed);
   EXPECT_EQ(servers[0].writer_handle, 21u);
   EXPECT_EQ(RecordAnnouncement(servers, again, 256), LeaseChange::kNone) << "counted once";
-  EXPECT_EQ(ApplyLivelinessChange(servers, 21, +1), LeaseChange::kNone) << "already alive: not counted again";
+  EXPECT_EQ(ApplyLivelinessChange(servers, 21, +1, kNow), LeaseChange::kNone) << "already alive: not counted again";
   // A new server is recorded, up to the limit.
   EXPECT_EQ(RecordAnnouncement(servers, Server("b", 0), 2), LeaseChange::kNone);
   EXPECT_EQ(RecordAnnouncement(servers, Server("c", 0), 2), LeaseChange::kNone);
   EXPECT_EQ(servers.size(), 2u);
+}
+
+// A dead server's lease seen to lapse, "come back" (its last packets read late by a client
+// whose receive thread stalled) and lapse again: during the return the lapse still counts for a
+// client that has had no force since before it, not for one whose last force came after it.
+TEST(ChooseServer, ALeaseThatLapsedDuringASilenceCountsEvenAfterItCameBack) {
+  std::vector<ServerAnnouncement> servers = {Server("a", 0)};
+  servers[0].writer_handle = 11;
+  constexpr int64_t kMs = 1'000'000;
+  EXPECT_FALSE(LeaseLapsedSince(servers[0], kNow)) << "never lapsed";
+  ASSERT_EQ(ApplyLivelinessChange(servers, 11, -1, kNow + 50 * kMs), LeaseChange::kLapsed);
+  EXPECT_TRUE(LeaseLapsedSince(servers[0], kNow)) << "lapsed now";
+  ASSERT_EQ(ApplyLivelinessChange(servers, 11, +1, kNow + 60 * kMs), LeaseChange::kRegained);
+  EXPECT_FALSE(servers[0].lease_lapsed);
+  EXPECT_TRUE(LeaseLapsedSince(servers[0], kNow)) << "lapsed after the last force at kNow, came back since";
+  EXPECT_FALSE(LeaseLapsedSince(servers[0], kNow + 55 * kMs)) << "a force came after the lapse";
+  // An announcement from it keeps the time of the lapse.
+  ServerAnnouncement again = Server("a", 1);
+  again.writer_handle = 11;
+  EXPECT_EQ(RecordAnnouncement(servers, again, 256), LeaseChange::kNone);
+  EXPECT_EQ(servers[0].lapsed_ns, kNow + 50 * kMs);
+  EXPECT_TRUE(LeaseLapsedSince(servers[0], kNow));
 }
 
 TEST(ChooseServer, ClientsJoiningAtOnceSpreadOverEquallyLoadedServers) {
