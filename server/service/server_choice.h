@@ -58,10 +58,11 @@ LeaseChange ApplyLivelinessChange(std::span<ServerAnnouncement> servers, uint64_
                                   int32_t alive_count_change, int64_t now_ns);
 
 // The server's lease is lapsed now, or lapsed after since_ns (CLOCK_MONOTONIC) and came back.
-// Why the second: a client whose own DDS receive thread stalls sees a dead server's lease lapse,
-// then "come back" when the packets the server sent before it died are read late, then lapse
-// again 50 ms later; in between the lapse was not visible and the client waited for the
-// round-trip rule (160.5 ms without a force in CI, several_servers_in_namespaces, 2026-12-07).
+// Why the second: a client whose own DDS receive thread stalls can see a dead server's lease
+// lapse, then "come back" when the packets the server sent before it died are read late, then
+// lapse again 50 ms later; in between the lapse is not visible, and a client waited for the
+// round-trip rule (160.5 ms without a force in CI, several_servers_in_namespaces, 2026-12-07;
+// docs/several-servers.md).
 bool LeaseLapsedSince(const ServerAnnouncement& server, int64_t since_ns);
 
 // Records a new announcement (a ServerStatus sample) among `servers` (at most `max_servers`
