@@ -78,30 +78,4 @@ void StaticBoxTree::Overlapping(const Eigen::Vector3d& lo, const Eigen::Vector3d
   }
 }
 
-bool StaticBoxTree::AnyOverlapping(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi,
-                                   std::vector<int>* stack) const {
-  if (nodes_.empty()) return false;
-  const auto overlaps = [&](const Eigen::Vector3d& min_m, const Eigen::Vector3d& max_m) {
-    return (min_m.array() <= hi.array()).all() && (max_m.array() >= lo.array()).all();
-  };
-  stack->clear();
-  stack->push_back(0);
-  while (!stack->empty()) {
-    const int self = stack->back();
-    const Node& node = nodes_[static_cast<std::size_t>(self)];
-    stack->pop_back();
-    if (!overlaps(node.min_m, node.max_m)) continue;
-    if (node.count == 0) {
-      stack->push_back(node.right);
-      stack->push_back(self + 1);
-      continue;
-    }
-    for (int k = node.first; k < node.first + node.count; ++k) {
-      const int id = order_[static_cast<std::size_t>(k)];
-      if (overlaps(box_min_m_[static_cast<std::size_t>(id)], box_max_m_[static_cast<std::size_t>(id)])) return true;
-    }
-  }
-  return false;
-}
-
 }  // namespace hapco::sim

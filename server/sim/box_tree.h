@@ -27,25 +27,23 @@ class StaticBoxTree {
   // allocation-free call.
   void Overlapping(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, std::vector<int>* hits,
                    std::vector<int>* stack) const;
-  // Whether any box overlaps [lo, hi] (closed), stopping at the first found.
-  bool AnyOverlapping(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, std::vector<int>* stack) const;
-  // Calls visit(id) for the boxes that contain the point x (closed) until it returns true;
-  // true if one did. No scratch, no allocation, safe from several threads at once (a stack on
-  // the call's frame; trees deeper than kMaxDepth are not built: the median split of n boxes
-  // is about log2(n) deep).
+  // Calls visit(id) for the boxes that overlap [lo, hi] (closed) until it returns true; true
+  // if one did. No scratch, no allocation, safe from several threads at once (a stack on the
+  // call's frame; trees deeper than kMaxDepth are not built: the median split of n boxes is
+  // about log2(n) deep).
   template <typename Visit>
-  bool AnyContaining(const Eigen::Vector3d& x, Visit visit) const {
+  bool AnyOverlapping(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, Visit visit) const {
     if (nodes_.empty()) return false;
     std::array<int, kMaxDepth + 2> stack{};
     int top = 0;
     stack[static_cast<std::size_t>(top++)] = 0;
-    auto contains = [&x](const Eigen::Vector3d& min_m, const Eigen::Vector3d& max_m) {
-      return (min_m.array() <= x.array()).all() && (max_m.array() >= x.array()).all();
+    auto overlaps = [&lo, &hi](const Eigen::Vector3d& min_m, const Eigen::Vector3d& max_m) {
+      return (min_m.array() <= hi.array()).all() && (max_m.array() >= lo.array()).all();
     };
     while (top > 0) {
       const int self = stack[static_cast<std::size_t>(--top)];
       const Node& node = nodes_[static_cast<std::size_t>(self)];
-      if (!contains(node.min_m, node.max_m)) continue;
+      if (!overlaps(node.min_m, node.max_m)) continue;
       if (node.count == 0) {
         stack[static_cast<std::size_t>(top++)] = node.right;
         stack[static_cast<std::size_t>(top++)] = self + 1;
@@ -53,12 +51,21 @@ class StaticBoxTree {
       }
       for (int k = node.first; k < node.first + node.count; ++k) {
         const int id = order_[static_cast<std::size_t>(k)];
-        if (contains(box_min_m_[static_cast<std::size_t>(id)], box_max_m_[static_cast<std::size_t>(id)]) && visit(id)) {
+        if (overlaps(box_min_m_[static_cast<std::size_t>(id)], box_max_m_[static_cast<std::size_t>(id)]) && visit(id)) {
           return true;
         }
       }
     }
     return false;
+  }
+  // Whether any box overlaps [lo, hi] (closed), stopping at the first found.
+  bool AnyOverlapping(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi) const {
+    return AnyOverlapping(lo, hi, [](int) { return true; });
+  }
+  // The same for the boxes that contain the point x (closed).
+  template <typename Visit>
+  bool AnyContaining(const Eigen::Vector3d& x, Visit visit) const {
+    return AnyOverlapping(x, x, visit);
   }
   static constexpr int kMaxDepth = 60;
 

@@ -33,7 +33,6 @@ MultirateAnswerer::MultirateAnswerer(TwoBodySession& session, LocalModelBuilder&
                                      MultirateParameters parameters)
     : session_(&session), builder_(&builder), parameters_(parameters) {
   ValidateMultirateParameters(parameters_);
-  clear_stack_.reserve(static_cast<std::size_t>(session.model().obstacle_surface().triangle_tree.depth()) + 2);
 }
 
 bool MultirateAnswerer::ModelAnswers(const Eigen::Vector3d& d, MultirateAnswer* answer) {
@@ -55,7 +54,7 @@ bool MultirateAnswerer::ModelAnswers(const Eigen::Vector3d& d, MultirateAnswer* 
   // (TwoBodySession::Release): the last step's contacts would otherwise be solved again at a
   // pose where none can hold (a helper session: 2 kN on three clear poses after a push into a
   // clamped end, 7.3 N after sliding off a side face, with --physics-every 4).
-  if (!last.device_force_n.isZero() && session_->model().RigidToolClearOfObstacle(d, &clear_stack_)) return false;
+  if (!last.device_force_n.isZero() && session_->model().RigidToolClearOfObstacle(d)) return false;
   const bool answered = parameters_.between_steps == BetweenSteps::kFrozenContacts
                             ? FrozenContactsAnswer(d, &answer->device_force_n)
                             : ReturnMappingAnswers(d, &answer->device_force_n);

@@ -124,7 +124,6 @@ class MultirateAnswerer {
   bool have_model_ = false;  // a step has run since construction or Reset
   int model_answers_in_a_row_ = 0;
   Eigen::Vector3d previous_pose_m_ = Eigen::Vector3d::Zero();  // the last pose answered, m
-  std::vector<int> clear_stack_;  // scratch of TwoBodyModel::RigidToolClearOfObstacle
   long turn_steps_ = 0;
 };
 

@@ -624,7 +624,7 @@ const StepOutput& TwoBodySession::StepOnce(const Eigen::Vector3d& device_transla
   //    (Only a loaded state: contacts kept within the activation gap carry zero force.)
   const bool was_loaded = std::any_of(previous_ids_.begin(), previous_ids_.end(),
                                       [&](int id) { return !force_by_id_n_.segment<3>(3 * id).isZero(0.0); });
-  if (was_loaded && model_.RigidToolClearOfObstacle(device_translation_m, &tree_stack_)) {
+  if (was_loaded && model_.RigidToolClearOfObstacle(device_translation_m)) {
     Release();
     output_.released = true;
   }

@@ -569,9 +569,9 @@ bool TwoBodyModel::ToolInsideObstacle(const Eigen::Vector3d& device_translation_
   return false;
 }
 
-bool TwoBodyModel::RigidToolClearOfObstacle(const Eigen::Vector3d& device_translation_m, std::vector<int>* stack) const {
+bool TwoBodyModel::RigidToolClearOfObstacle(const Eigen::Vector3d& device_translation_m) const {
   const Eigen::Vector3d lo = tool_lo_m_ + device_translation_m, hi = tool_hi_m_ + device_translation_m;
-  if (obstacle_surface_.triangle_tree.AnyOverlapping(lo, hi, stack)) return false;
+  if (obstacle_surface_.triangle_tree.AnyOverlapping(lo, hi)) return false;
   // No face near: wholly outside, or wholly inside (one node tells: a tree query, and only
   // inside the obstacle's box).
   return tool_surface_.nodes.empty() ||

@@ -158,8 +158,8 @@ class TwoBodyModel {
   // obstacle. Conservative (boxes): false may still be clear. Then no contact can hold: with
   // every gap of the rigid configuration open, the linear contact problem's only solution is
   // zero force (contact forces push the bodies apart, r·Wr > 0), whatever the bodies' last
-  // deformation (TwoBodySession::StepOnce releases it). A few µs; *stack is scratch.
-  bool RigidToolClearOfObstacle(const Eigen::Vector3d& device_translation_m, std::vector<int>* stack) const;
+  // deformation (TwoBodySession::StepOnce releases it). A few µs, no allocation.
+  bool RigidToolClearOfObstacle(const Eigen::Vector3d& device_translation_m) const;
   // The mean outward normal of the obstacle faces nearest the tool at the start (unit; zero
   // when the tool faces none within reach): the direction a session's approach presses along.
   const Eigen::Vector3d& approach_normal() const { return approach_normal_; }

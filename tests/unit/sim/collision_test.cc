@@ -628,7 +628,7 @@ TEST(StaticBoxTreeTest, OverlapQueriesMatchATestOfEveryBox) {
     EXPECT_LE(stack.capacity(), static_cast<std::size_t>(tree.depth()) + 1);  // never grew
     // AnyOverlapping and, for a point, AnyContaining (visiting every box that holds it) say
     // the same as the full query.
-    EXPECT_EQ(tree.AnyOverlapping(a, b, &stack), !expected.empty()) << "query " << query;
+    EXPECT_EQ(tree.AnyOverlapping(a, b), !expected.empty()) << "query " << query;
     if (query % 2 == 1) {
       std::vector<int> visited;
       EXPECT_FALSE(tree.AnyContaining(a, [&](int id) {

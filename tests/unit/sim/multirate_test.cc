@@ -207,11 +207,10 @@ TEST(Multirate, AToolClearOfTheBarIsAnsweredZeroBetweenSteps) {
   const std::vector<Eigen::Vector3d> reference = EveryPose(model, path);
   const Answers answers = AnswerAll(model, path, 4);
   int clear = 0;
-  std::vector<int> stack;
   double pressed_n = 0.0;
   for (std::size_t k = 0; k < path.size(); ++k) {
     pressed_n = std::max(pressed_n, reference[k].norm());
-    if (!model.RigidToolClearOfObstacle(path[k], &stack)) continue;
+    if (!model.RigidToolClearOfObstacle(path[k])) continue;
     ++clear;
     EXPECT_TRUE(reference[k].isZero()) << "pose " << k << ": a step gives " << reference[k].transpose();
     EXPECT_TRUE(answers.force_n[k].isZero()) << "pose " << k << " (" << AnswerSourceName(answers.source[k])
