@@ -181,10 +181,18 @@ TEST(ServerFailover, ClientRampsToZeroWhenTheServerDiesAndResumesWhenOneReturns)
       EXPECT_LE(ticks[i].rendered_n.norm(), ticks[i - 1].rendered_n.norm() + 1e-12) << ticks[i].tick;
     }
     if (ticks[i].time_s >= zero_from_s + 0.0015) {
-      ASSERT_EQ(ticks[i].rendered_n.norm(), 0.0) << "t = " << ticks[i].time_s << " s, outage from "
-                                                 << ticks[gap_begin].time_s << " s to " << ticks[gap_end].time_s
-                                                 << " s, force before " << before_n << " N";
-      ++zero_ticks;
+      // Zero by then, unless this client stalled during the ramp: a late tick still drops the
+      // force by at most kMaxChangePerTickN (no click, SafetyFilter), so until it reaches zero
+      // every tick must drop by exactly that much (a CI run saw 1.175 N 2 ms past the deadline
+      // after a 92-tick stall).
+      const double now_n = ticks[i].rendered_n.norm(), before_tick_n = ticks[i - 1].rendered_n.norm();
+      if (now_n != 0.0) {
+        ASSERT_NEAR(now_n, before_tick_n - kMaxChangePerTickN, 1e-3)
+            << "t = " << ticks[i].time_s << " s, outage from " << ticks[gap_begin].time_s << " s to "
+            << ticks[gap_end].time_s << " s, force before " << before_n << " N: not zero and not catching up";
+      } else {
+        ++zero_ticks;
+      }
     }
   }
   EXPECT_GT(zero_ticks, 10u);
