@@ -380,7 +380,19 @@ ContactDetector::Box ContactDetector::InflatedBox(const PointsRef& obstacle_posi
   box.min = a.cwiseMin(b).cwiseMin(c);
   box.max = a.cwiseMax(b).cwiseMax(c);
   const double extent_m = (box.max - box.min).maxCoeff();
-  const double margin_m = normal_margin_m + (2.0 * parameters.edge_tolerance + 1e-12) * extent_m;
+  // A 6-node face's surface lies within (4/3) max_k |midside offset k| of the flat triangle
+  // (TestTriangle accepts gaps to that surface).
+  double bulge_m = 0.0;
+  if (tri.midsides[0] >= 0) {
+    const std::array<Eigen::Vector3d, 3> corners{a, b, c};
+    for (int k = 0; k < 3; ++k) {
+      const Eigen::Vector3d offset = Row(obstacle_positions_m, tri.midsides[static_cast<std::size_t>(k)]) -
+                                     0.5 * (corners[static_cast<std::size_t>(k)] + corners[static_cast<std::size_t>((k + 1) % 3)]);
+      bulge_m = std::max(bulge_m, offset.norm());
+    }
+    bulge_m *= 4.0 / 3.0;
+  }
+  const double margin_m = normal_margin_m + bulge_m + (2.0 * parameters.edge_tolerance + 1e-12) * extent_m;
   box.min.array() -= margin_m;
   box.max.array() += margin_m;
   return box;
@@ -475,6 +487,20 @@ void ContactDetector::UpdateFaceGeometry(const PointsRef& obstacle_positions_m, 
   g.d01 = g.ab.dot(g.ac);
   g.d11 = g.ac.dot(g.ac);
   g.denom = g.d00 * g.d11 - g.d01 * g.d01;
+  g.quadratic = tri.midsides[0] >= 0;
+  g.bulge_m = 0.0;
+  if (g.quadratic) {
+    const std::array<Eigen::Vector3d, 3> corners{g.a, g.a + g.ab, g.a + g.ac};
+    double largest_m = 0.0;
+    for (int k = 0; k < 3; ++k) {
+      const auto edge = static_cast<std::size_t>(k);
+      g.midside_offset_m[edge] = Row(obstacle_positions_m, tri.midsides[edge]) -
+                                 0.5 * (corners[edge] + corners[static_cast<std::size_t>((k + 1) % 3)]);
+      largest_m = std::max(largest_m, std::abs(g.midside_offset_m[edge].dot(g.normal)));
+    }
+    g.bulge_m = largest_m * (4.0 / 3.0);
+    if (!std::isfinite(g.bulge_m)) g.valid = false;
+  }
 }
 
 void ContactDetector::TestTriangle(int triangle, const Eigen::Vector3d& x, int tool_index,
@@ -499,8 +525,9 @@ void ContactDetector::TestTriangle(int triangle, const Eigen::Vector3d& x, int t
   if (!g.valid) return;
   const Eigen::Vector3d& n = g.normal;
   const Eigen::Vector3d ap = x - g.a;
-  const double gap_m = ap.dot(n);
-  if (!(gap_m < parameters.activation_gap_m && gap_m >= -max_depth_m)) return;
+  const double flat_gap_m = ap.dot(n);
+  // (A 6-node face's surface lies within bulge_m of the flat triangle: the exact test is below.)
+  if (!(flat_gap_m < parameters.activation_gap_m + g.bulge_m && flat_gap_m >= -max_depth_m - g.bulge_m)) return;
   // ProjectionBarycentric(x, a, b, c) from the face's cached terms.
   const Eigen::Vector3d projection = BarycentricFromDots(g.d00, g.d01, g.d11, g.denom, ap.dot(g.ab), ap.dot(g.ac));
   if (!(projection.minCoeff() >= -edge_tolerance)) return;
@@ -512,10 +539,22 @@ void ContactDetector::TestTriangle(int triangle, const Eigen::Vector3d& x, int t
   // for a projection just outside an edge the nearest point of that edge.
   const Eigen::Vector3d bary =
       projection.minCoeff() >= 0.0 ? projection : ClosestPointBarycentric(x, a, b, c);
+  Eigen::Vector3d point_m = bary[0] * a + bary[1] * b + bary[2] * c;
+  double gap_m = flat_gap_m;
+  if (g.quadratic) {
+    // The quadratic surface's point at these coordinates: Σ N_i x_i = the flat point +
+    // Σ_k 4 l_k l_k+1 (midside offset k) (the corner and midside shape functions of Select),
+    // and its gap along the face normal.
+    for (int k = 0; k < 3; ++k) {
+      point_m += (4.0 * bary[k] * bary[(k + 1) % 3]) * g.midside_offset_m[static_cast<std::size_t>(k)];
+    }
+    gap_m = (x - point_m).dot(n);
+    if (!(gap_m < parameters.activation_gap_m && gap_m >= -max_depth_m)) return;
+  }
   Candidate& candidate = candidates_.emplace_back();
   candidate.triangle = triangle;
   candidate.gap_m = gap_m;
-  candidate.point_m = bary[0] * a + bary[1] * b + bary[2] * c;
+  candidate.point_m = point_m;
   candidate.normal = n;
   candidate.barycentric = bary;
   candidate.persistent = previous_normal.dot(reference_n) >= parameters.persistence_min_cosine;

@@ -4,13 +4,18 @@
 // contact frame of algorithms.md §2 (n points from the red surface towards the green body,
 // local vectors ordered [n, t1, t2], u_n >= 0 separated).
 //
-// Geometry is first order: a face is the flat triangle through its three corner nodes, also
-// for Tet10 faces. The gap, the closest point and the frame come from that flat triangle; for
-// a Tet10 face the weights that spread the obstacle point onto its six nodes are the
-// quadratic 6-node triangle shape functions at the closest point's barycentric coordinates.
-// While a face's midside nodes stay at their edge midpoints (straight edges) the weights
-// reproduce the flat point exactly; on a curved (deformed) Tet10 face the difference is of the
-// order of the face curvature times the squared face size. Where that is not negligible (a
+// A face is searched as the flat triangle through its three corner nodes, also for Tet10
+// faces: the projection (barycentric coordinates) and the frame come from that flat triangle.
+// For a Tet10 face the weights that spread the obstacle point onto its six nodes are the
+// quadratic 6-node triangle shape functions at those barycentric coordinates, and the point
+// and the gap are those of the quadratic surface there (Σ N_i x_i), which is what the solver
+// constrains (the problem's gap is n·(x_tool − Σ N_i x_i), step_pipeline.cc). Measured to the
+// flat triangle instead, a pair the solver had closed could read past the activation gap once
+// the load dimpled the face: a held pose then cycled 24 / 25 contacts for ever
+// (docs/free-interaction.md, "Gap to the quadratic surface"). While a face's midside nodes stay at their
+// edge midpoints (straight edges) both points coincide; on a curved (deformed) Tet10 face
+// they differ by the order of the face curvature times the squared face size. Where the
+// projection itself goes wrong (a
 // tool smaller than the faces presses a dimple into one face), the caller searches each 6-node
 // face as its four flat sub-triangles through the midside nodes (FourSubtriangles) and gives
 // the detector each sub-triangle's face: the gap and the closest point then come from the
@@ -154,8 +159,8 @@ class ContactDetector {
                   std::vector<SubtriangleOfFace> subtriangle_faces = {});
 
   // Current (deformed) node positions: obstacle N_o x 3, tool N_t x 3 (reference +
-  // displacement), m. Only the corner nodes of the given triangles and the candidate tool
-  // nodes are read, so rows of other nodes may be stale. Fills *contacts (cleared first, in tool_nodes order). For each tool
+  // displacement), m. Only the nodes of the given triangles (corners and midsides) and the
+  // candidate tool nodes are read, so rows of other nodes may be stale. Fills *contacts (cleared first, in tool_nodes order). For each tool
   // node: among faces whose flat normal projection holds the node (within edge_tolerance),
   // that pass the normal check, with -max_penetration <= gap < activation_gap, the one with
   // the smallest |gap|; ties within round-off (a node on an edge shared by coplanar faces) go
@@ -217,6 +222,13 @@ class ContactDetector {
     Eigen::Vector3d normal = Eigen::Vector3d::Zero();  // unit, outward
     double d00 = 0.0, d01 = 0.0, d11 = 0.0, denom = 0.0;  // ab·ab, ab·ac, ac·ac, d00 d11 − d01², m², m⁴
     bool valid = false;  // false: collapsed or non-finite (no normal)
+    // 6-node faces: midside k's offset from the midpoint of its edge (c_k, c_k+1), m, and a
+    // bound on how far the quadratic surface lies from the flat triangle along the normal,
+    // (4/3) max_k |n·offset_k|, m (Σ_k 4 l_k l_k+1 <= 4/3). Zero for 3-node faces.
+    std::array<Eigen::Vector3d, 3> midside_offset_m{Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(),
+                                                    Eigen::Vector3d::Zero()};
+    double bulge_m = 0.0;
+    bool quadratic = false;
   };
 
   int BuildNode(const std::vector<Eigen::Vector3d>& centroids, int begin, int end, int depth);

@@ -294,10 +294,12 @@ void TwoBodySession::BroadPhase(const Eigen::Vector3d& increment_m) {
     if (!enabled) continue;
     obstacle_triangle_enabled_[static_cast<std::size_t>(t)] = 1;
     enabled_triangles_.push_back(t);
-    // The detector reads the searched triangles' corners only (flat faces; with the
-    // FOUR_SUBTRIANGLES search these include the 6-node faces' midsides); the other midsides of
-    // the faces that end up in contact are added after detection (CompleteContactDisplacements).
-    for (int node : tri.corners) {
+    // The detector reads the searched triangles' nodes: the corners, and a 6-node face's
+    // midsides for its quadratic surface point (ContactDetector); with the FOUR_SUBTRIANGLES
+    // search the sub-triangles' corners are the faces' corners and midsides.
+    for (int k = 0; k < 6; ++k) {
+      const int node = k < 3 ? tri.corners[static_cast<std::size_t>(k)] : tri.midsides[static_cast<std::size_t>(k - 3)];
+      if (node < 0) continue;
       const int slot = node_index[static_cast<std::size_t>(node)];
       if (!in_region_[static_cast<std::size_t>(slot)]) {
         in_region_[static_cast<std::size_t>(slot)] = 1;

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <cmath>
 #include <cstdlib>
@@ -97,7 +98,8 @@ void ExpectWellFormed(const ContactPoint& c, const Points& obstacle, const Point
   EXPECT_NEAR(c.gap_m, (x - c.obstacle_point_m).dot(n), 1e-12);
 }
 
-// Σ w_i x_i = obstacle point (holds while Tet10 midsides sit at their edge midpoints).
+// Σ w_i x_i = obstacle point: the point is the face's surface point (quadratic on a 6-node
+// face), the one the weights carry into the solver.
 void ExpectWeightsReproducePoint(const ContactPoint& c, const Points& obstacle) {
   Eigen::Vector3d weighted = Eigen::Vector3d::Zero();
   for (int k = 0; k < c.num_obstacle_nodes; ++k) {
@@ -251,7 +253,8 @@ INSTANTIATE_TEST_SUITE_P(Orders, FlatBoxTest,
                          ::testing::Values(fem::ElementOrder::kTet4, fem::ElementOrder::kTet10),
                          OrderName);
 
-// Independent brute force: plane projection by least squares, nearest |gap|.
+// Independent brute force: plane projection by least squares onto the corner triangle, the
+// gap to the face's surface there (quadratic for 6-node faces), nearest |gap|.
 struct Reference {
   bool found = false;
   double gap_m = 0.0;
@@ -274,13 +277,24 @@ Reference ReferenceSearch(const std::vector<fem::SurfaceTriangle>& tris, const P
     const double u = 1.0 - st.sum();
     if (std::min({u, st[0], st[1]}) < -p.edge_tolerance) continue;
     const Eigen::Vector3d n = (b - a).cross(c - a).normalized();
-    const double g = (x - a).dot(n);
+    // The surface point: the flat one, or on a 6-node face the quadratic surface at the same
+    // face coordinates (P2 triangle: corners l_k (2 l_k - 1), midside of edge (k, k+1) 4 l_k l_k+1).
+    Eigen::Vector3d point = a + m * st;
+    if (t.midsides[0] >= 0) {
+      const std::array<double, 3> l{u, st[0], st[1]};
+      point.setZero();
+      for (int k = 0; k < 3; ++k) {
+        point += l[k] * (2.0 * l[k] - 1.0) * obstacle.row(t.corners[k]).transpose() +
+                 4.0 * l[k] * l[(k + 1) % 3] * obstacle.row(t.midsides[k]).transpose();
+      }
+    }
+    const double g = (x - point).dot(n);
     if (!(g < p.activation_gap_m && g >= -p.max_penetration_m)) continue;
     if (!best.found || std::abs(g) < std::abs(best.gap_m)) {
       if (best.found) runner_up = std::abs(best.gap_m);
       best.found = true;
       best.gap_m = g;
-      best.point_m = a + m * st;
+      best.point_m = point;
       best.normal = n;
     } else {
       runner_up = std::min(runner_up, std::abs(g));
@@ -355,6 +369,7 @@ TEST(ContactDetectorTest, TreeMatchesBruteForceOnRandomPoints) {
         EXPECT_LT((c.frame.row(0).transpose() - ref.normal).norm(), 1e-12) << "point " << i;
       }
       ExpectWellFormed(c, obstacle, tool);
+      ExpectWeightsReproducePoint(c, obstacle);  // also on the sagged (curved) faces
     }
     EXPECT_GT(unique, 400);
   }
@@ -742,7 +757,9 @@ TEST(QuadraticFaceSubtriangles, FlatFaceGivesTheCornerTriangleContact) {
 TEST(QuadraticFaceSubtriangles, SeeADimplePressedIntoTheFace) {
   // The midsides pressed 0.5 mm into the face (a small tool's dimple): the middle sub-triangle
   // is the plane z = -h. A node 0.1 mm above it is 0.1 mm from the face's surface there, not
-  // 0.4 mm inside the flat triangle of the corners.
+  // 0.4 mm inside the flat triangle of the corners. The corner-triangle search projects on
+  // that flat triangle and measures the gap to the quadratic surface at the projection (the
+  // point its weights give): the P2 surface at l, z = -h (4 Σ_k l_k l_k+1).
   Points x = SixNodeFace();
   const double h = 5e-4, g = 1e-4;
   for (int m = 3; m < 6; ++m) x(m, 2) = -h;
@@ -759,7 +776,10 @@ TEST(QuadraticFaceSubtriangles, SeeADimplePressedIntoTheFace) {
   subtriangles.Detect(x, tool, parameters, &b);
   ASSERT_EQ(a.size(), 1u);
   ASSERT_EQ(b.size(), 1u);
-  EXPECT_NEAR(a[0].gap_m, g - h, 1e-15);  // the flat corner triangle
+  const double quadratic_z_m = -h * 4.0 * (l[0] * l[1] + l[1] * l[2] + l[2] * l[0]);
+  EXPECT_NEAR(a[0].gap_m, (-h + g) - quadratic_z_m, 1e-15);  // the quadratic surface under the node
+  EXPECT_LT((a[0].obstacle_point_m - Eigen::Vector3d(foot.x(), foot.y(), quadratic_z_m)).norm(), 1e-15);
+  ExpectWeightsReproducePoint(a[0], x);
   EXPECT_NEAR(b[0].gap_m, g, 1e-15);      // the dimple
   EXPECT_LT((b[0].obstacle_point_m - Eigen::Vector3d(foot.x(), foot.y(), -h)).norm(), 1e-15);
   ExpectWellFormed(b[0], x, tool);
