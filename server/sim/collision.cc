@@ -88,6 +88,19 @@ void CheckParameters(const CollisionParameters& p) {
   }
 }
 
+// A 6-node face's midsides, each as its offset from the midpoint of its edge (corner k,
+// corner k+1), m. Its quadratic surface is the corner triangle plus Σ_k 4 l_k l_k+1 offset_k,
+// and Σ_k 4 l_k l_k+1 <= 4/3 on the face: the surface lies within (4/3) max_k |offset_k| of
+// the triangle.
+std::array<Eigen::Vector3d, 3> MidsideOffsets(const PointsRef& positions_m, const fem::SurfaceTriangle& face,
+                                              const std::array<Eigen::Vector3d, 3>& corners_m) {
+  std::array<Eigen::Vector3d, 3> offsets;
+  for (std::size_t k = 0; k < 3; ++k) {
+    offsets[k] = Row(positions_m, face.midsides[k]) - 0.5 * (corners_m[k] + corners_m[(k + 1) % 3]);
+  }
+  return offsets;
+}
+
 // Barycentric coordinates of a point's projection into a triangle from the dot products of
 // its edges ab, ac (d00 = ab·ab, d01 = ab·ac, d11 = ac·ac, denom = d00 d11 − d01²) and of the
 // point's offset ap (d20 = ap·ab, d21 = ap·ac): the one formula of ProjectionBarycentric and
@@ -380,17 +393,12 @@ ContactDetector::Box ContactDetector::InflatedBox(const PointsRef& obstacle_posi
   box.min = a.cwiseMin(b).cwiseMin(c);
   box.max = a.cwiseMax(b).cwiseMax(c);
   const double extent_m = (box.max - box.min).maxCoeff();
-  // A 6-node face's surface lies within (4/3) max_k |midside offset k| of the flat triangle
-  // (TestTriangle accepts gaps to that surface).
+  // (TestTriangle accepts gaps to a 6-node face's quadratic surface: MidsideOffsets.)
   double bulge_m = 0.0;
   if (tri.midsides[0] >= 0) {
-    const std::array<Eigen::Vector3d, 3> corners{a, b, c};
-    for (int k = 0; k < 3; ++k) {
-      const Eigen::Vector3d offset = Row(obstacle_positions_m, tri.midsides[static_cast<std::size_t>(k)]) -
-                                     0.5 * (corners[static_cast<std::size_t>(k)] + corners[static_cast<std::size_t>((k + 1) % 3)]);
-      bulge_m = std::max(bulge_m, offset.norm());
+    for (const Eigen::Vector3d& offset : MidsideOffsets(obstacle_positions_m, tri, {a, b, c})) {
+      bulge_m = std::max(bulge_m, (4.0 / 3.0) * offset.norm());
     }
-    bulge_m *= 4.0 / 3.0;
   }
   const double margin_m = normal_margin_m + bulge_m + (2.0 * parameters.edge_tolerance + 1e-12) * extent_m;
   box.min.array() -= margin_m;
@@ -490,16 +498,11 @@ void ContactDetector::UpdateFaceGeometry(const PointsRef& obstacle_positions_m, 
   g.quadratic = tri.midsides[0] >= 0;
   g.bulge_m = 0.0;
   if (g.quadratic) {
-    const std::array<Eigen::Vector3d, 3> corners{g.a, g.a + g.ab, g.a + g.ac};
-    double largest_m = 0.0;
-    for (int k = 0; k < 3; ++k) {
-      const auto edge = static_cast<std::size_t>(k);
-      g.midside_offset_m[edge] = Row(obstacle_positions_m, tri.midsides[edge]) -
-                                 0.5 * (corners[edge] + corners[static_cast<std::size_t>((k + 1) % 3)]);
-      largest_m = std::max(largest_m, std::abs(g.midside_offset_m[edge].dot(g.normal)));
+    g.midside_offset_m = MidsideOffsets(obstacle_positions_m, tri, {g.a, g.a + g.ab, g.a + g.ac});
+    for (const Eigen::Vector3d& offset : g.midside_offset_m) {
+      g.bulge_m = std::max(g.bulge_m, (4.0 / 3.0) * std::abs(offset.dot(g.normal)));
+      if (!offset.allFinite()) g.valid = false;  // a non-finite midside: no surface to measure
     }
-    g.bulge_m = largest_m * (4.0 / 3.0);
-    if (!std::isfinite(g.bulge_m)) g.valid = false;
   }
 }
 
