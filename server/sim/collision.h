@@ -12,11 +12,11 @@
 // constrains (the problem's gap is n·(x_tool − Σ N_i x_i), step_pipeline.cc). Measured to the
 // flat triangle instead, a pair the solver had closed could read past the activation gap once
 // the load dimpled the face: a held pose then cycled 24 / 25 contacts for ever
-// (docs/free-interaction.md, "Gap to the quadratic surface"). While a face's midside nodes stay at their
-// edge midpoints (straight edges) both points coincide; on a curved (deformed) Tet10 face
-// they differ by the order of the face curvature times the squared face size. Where the
-// projection itself goes wrong (a
-// tool smaller than the faces presses a dimple into one face), the caller searches each 6-node
+// (docs/free-interaction.md, "Gap to the quadratic surface"). While a face's midside nodes
+// stay at their edge midpoints (straight edges) both points coincide; on a curved (deformed)
+// Tet10 face they differ by the order of the face curvature times the squared face size.
+// Where the projection itself goes wrong (a tool smaller than the faces presses a dimple into
+// one face, and the node's projection jumps between faces), the caller searches each 6-node
 // face as its four flat sub-triangles through the midside nodes (FourSubtriangles) and gives
 // the detector each sub-triangle's face: the gap and the closest point then come from the
 // sub-triangle, and the weights stay the face's quadratic ones at the face's parametric point
