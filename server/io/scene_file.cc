@@ -35,6 +35,21 @@ using google::protobuf::FieldDescriptor;
 using google::protobuf::Message;
 using google::protobuf::TextFormat;
 
+// Whether a .geo file names a physical group `name` (a line with `Physical` and "name"). Gmsh
+// drops a group whose selection holds no entity (a BoundingBox that misses), so the mesh lacks
+// a group the user did define: the message must say so instead of "not in the file".
+bool GeoNamesPhysicalGroup(const std::string& geo_path, const std::string& name) {
+  std::ifstream in(geo_path);
+  const std::string quoted = "\"" + name + "\"";
+  std::string line;
+  while (std::getline(in, line)) {
+    const auto comment = line.find("//");
+    if (comment != std::string::npos) line.resize(comment);
+    if (line.find("Physical") != std::string::npos && line.find(quoted) != std::string::npos) return true;
+  }
+  return false;
+}
+
 // Collects the first syntax error with its 1-based line and column.
 class FirstErrorCollector : public google::protobuf::io::ErrorCollector {
  public:
@@ -317,6 +332,14 @@ class SceneChecker {
       if (found == imported.group_nodes.end()) {
         std::string known;
         for (const auto& [known_name, nodes] : imported.group_nodes) known += (known.empty() ? "" : ", ") + known_name;
+        if (file.extension() == ".geo" && GeoNamesPhysicalGroup(request.path, name)) {
+          Fail(mesh_path, mesh, mesh_tree, field,
+               "physical group '" + name + "' is defined in " + request.path +
+                   " but holds nothing, so Gmsh left it out of the mesh: its selection (a BoundingBox, an "
+                   "entity list) catches no entity of the geometry; check its coordinates in the .geo's "
+                   "own length unit" + (known.empty() ? "" : " (the mesh has: " + known + ")"),
+               index);
+        }
         Fail(mesh_path, mesh, mesh_tree, field,
              "physical group '" + name + "' is not in " + request.path +
                  (known.empty() ? " (it has no physical groups on its elements: define them in the .geo; a .msh "

@@ -603,6 +603,7 @@ const StepOutput& TwoBodySession::ContinueApproach(const Eigen::Vector3d& device
 const StepOutput& TwoBodySession::StepOnce(const Eigen::Vector3d& device_translation_m) {
   Stopwatch total;
   const int step = output_.step + 1;
+  const double previous_force_n = output_.contact_force_n.norm();
   output_ = StepOutput{};
   output_.step = step;
   output_.device_translation_m = device_translation_m;
@@ -629,6 +630,7 @@ const StepOutput& TwoBodySession::StepOnce(const Eigen::Vector3d& device_transla
   if (was_loaded && model_.RigidToolClearOfObstacle(device_translation_m)) {
     Release();
     output_.released = true;
+    output_.released_force_n = previous_force_n;
   }
   const double travel_m = (device_translation_m - device_translation_m_).norm();
   const double activation_gap_m =

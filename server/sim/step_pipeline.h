@@ -97,6 +97,10 @@ struct StepOutput {
   // contacts: their state (forces, both bodies' deformation) was dropped before this step
   // (TwoBodySession::Release).
   bool released = false;
+  // With `released`: |contact force| of the step before, the state dropped, N. After a push
+  // far past small strain it is kN; after a plain lift it is the solver's round-off (1e-6 of
+  // the peak at the scenes' tolerances), which a summary need not report.
+  double released_force_n = 0.0;
   // The step lost its last contacts with the tool inside the obstacle (passed into it): the
   // session re-enters by an approach from above (TwoBodySession::Step), `approaching` until
   // it reaches the device's pose.

@@ -8,6 +8,7 @@
 #include <map>
 #include <optional>
 #include <sstream>
+#include <tuple>
 #include <utility>
 
 #include "common/error.h"
@@ -214,18 +215,13 @@ void ComputeBandedCompliance(const fem::ElasticBody& body, ContactSurface* surfa
   });
 }
 
-void ComputeCompliance(const fem::ElasticBody& body, const std::string& name, ContactSurface* surface) {
+void ComputeCompliance(const fem::ElasticBody& body, ContactSurface* surface) {
   // Computed in the blocked layout's own storage and reordered there: the precomputation's
   // peak is the operator (and the body's factor), not the operator twice.
   if (surface->range_axis >= 0) {
     ComputeBandedCompliance(body, surface);
   } else {
-    if (surface->nodes.size() >= 2000) {  // (3n)^3 / 3 flops: 2 000 nodes take seconds, 7 000 minutes
-      ReportProgress(name + " compliance: " + std::to_string(surface->nodes.size()) +
-                     " contact surface nodes, dense, from a Schur complement of order " +
-                     std::to_string(3 * surface->nodes.size()) + "; " + name +
-                     ".mesh.contact_groups naming only the faces that can touch makes this shorter");
-    }
+    // (Its cost was announced before the factorization: ReportDenseComplianceCost.)
     surface->compliance_m_per_n = BlockedCompliance::FromDenseInPlace(
         static_cast<int>(surface->nodes.size()), [&](double* dense) { body.ComplianceBlockInto(surface->nodes, dense); });
   }
@@ -336,6 +332,43 @@ std::size_t BandedBytes(const fem::Mesh& mesh, std::vector<int> nodes, int axis,
   return sizeof(double) * 9 * blocks;
 }
 
+// A dense compliance of n surface nodes comes from the factor's dense Schur complement of
+// order 3n: (3n)^3 / 3 flops and 8 (3n)^2 bytes while the body is factored, then 72 n^2 bytes of
+// blocks. 2 000 nodes take seconds; a helper session's cylinder with its whole boundary in
+// contact (9 002 nodes) ran for minutes at 8 GB with nothing printed for the first 60 s. Said
+// before the factorization starts, with an estimate at the ~20 GFLOP/s measured here (benchmark
+// 1's reference: 3 170 nodes in 13 s), so a user can stop and name fewer contact faces.
+// For a message about the bodies' placement: a hint when a body is larger than a haptic scene
+// is (a helper session's tool read in mm as m was refused as "6022 mm deep" with no word on why).
+std::string LengthUnitHint(const fem::Mesh& obstacle_mesh, const fem::Mesh& tool_mesh) {
+  std::string hint;
+  for (const auto& [name, mesh] : {std::pair<const char*, const fem::Mesh*>{"obstacle", &obstacle_mesh},
+                                   std::pair<const char*, const fem::Mesh*>{"tool", &tool_mesh}}) {
+    const double extent_m = (mesh->nodes_m.colwise().maxCoeff() - mesh->nodes_m.colwise().minCoeff()).maxCoeff();
+    if (extent_m > 1.0) {
+      std::ostringstream text;
+      text << "; the " << name << " is " << extent_m << " m across: if its mesh file is in millimetres, its "
+           << "mesh.length_unit_m is 0.001";
+      hint += text.str();
+    }
+  }
+  return hint;
+}
+
+void ReportDenseComplianceCost(const std::string& name, std::size_t nodes) {
+  if (nodes < 2000) return;
+  const double order = 3.0 * static_cast<double>(nodes);
+  const double seconds = order * order * order / 3.0 / 2e10;
+  const double gib = (8.0 * order * order + 72.0 * static_cast<double>(nodes) * static_cast<double>(nodes)) / (1 << 30);
+  char line[400];
+  std::snprintf(line, sizeof(line),
+                "%s compliance: %zu contact surface nodes, dense, from a Schur complement of order %.0f: about "
+                "%.0f s and %.1f GiB at 20 GFLOP/s (scales as the cube of the nodes); %s.mesh.contact_groups "
+                "naming only the faces a tool can touch makes this shorter",
+                name.c_str(), nodes, order, seconds, gib, name.c_str());
+  ReportProgress(line);
+}
+
 }  // namespace
 
 TwoBodyModel::Parts TwoBodyModel::MakeParts(SceneSpec scene, std::size_t max_operator_bytes) {
@@ -422,6 +455,8 @@ TwoBodyModel::Parts TwoBodyModel::MakeParts(SceneSpec scene, std::size_t max_ope
   }
   // A banded obstacle gets its compliance by solves: its factor keeps CHOLMOD's own order.
   if (range_m > 0.0) obstacle_candidates.clear();
+  ReportDenseComplianceCost("obstacle", obstacle_candidates.size());
+  ReportDenseComplianceCost("tool", tool_candidates.size());
   fem::ElasticBody obstacle = BuildBody(scene.obstacle, std::move(obstacle_mesh), std::move(obstacle_candidates));
   fem::ElasticBody tool = BuildBody(scene.tool, std::move(tool_mesh), std::move(tool_candidates));
   Parts parts{std::move(scene), std::move(reachable), std::move(tool_faces), std::move(obstacle), std::move(tool)};
@@ -493,7 +528,8 @@ TwoBodyModel::TwoBodyModel(Parts parts)
       std::ostringstream message;
       message << "the tool starts inside the obstacle: tool node " << deepest->tool_node << " at ("
               << x.x() << ", " << x.y() << ", " << x.z() << ") m is " << -initial_gap_m_ * 1e3
-              << " mm deep; move the tool (its box, or its mesh's offset_m) so the bodies touch at most (zero gap)";
+              << " mm deep; move the tool (its box, or its mesh's offset_m) so the bodies touch at most (zero gap)"
+              << LengthUnitHint(obstacle_mesh, tool_mesh);
       throw InputError(message.str());
     }
     // Deeper than detection reaches, or wholly inside: a node of one body inside the other's
@@ -510,14 +546,15 @@ TwoBodyModel::TwoBodyModel(Parts parts)
       std::ostringstream message;
       message << "the tool starts inside the obstacle: " << (tool_deeper ? "tool" : "obstacle") << " node " << node.node
               << " at (" << x.x() << ", " << x.y() << ", " << x.z() << ") m is " << node.depth_m * 1e3 << " mm inside the "
-              << (tool_deeper ? "obstacle" : "tool") << "; move the tool (its box, or its mesh's offset_m) so the bodies touch at most (zero gap)";
+              << (tool_deeper ? "obstacle" : "tool") << "; move the tool (its box, or its mesh's offset_m) so the bodies touch at most (zero gap)"
+              << LengthUnitHint(obstacle_mesh, tool_mesh);
       throw InputError(message.str());
     }
   }
 
   Stopwatch compliance;
-  ComputeCompliance(obstacle_, "obstacle", &obstacle_surface_);
-  ComputeCompliance(tool_, "tool", &tool_surface_);
+  ComputeCompliance(obstacle_, &obstacle_surface_);
+  ComputeCompliance(tool_, &tool_surface_);
   stats_.compliance_seconds = compliance.ElapsedSeconds();
   // A large surface's dense Schur factor stays in its body's factor as large as its compliance
   // blocks, for nothing the step needs: factor once more without it (ElasticBody::
@@ -618,6 +655,23 @@ std::string ContactGroupsNote(const TwoBodyModel& model) {
        << ", y " << lo.y() * 1e3 << ".." << hi.y() * 1e3 << ", z " << lo.z() * 1e3 << ".." << hi.z() * 1e3
        << " mm (name more groups in contact_groups, or leave it out for the whole boundary)";
   return note.str();
+}
+
+std::string RigidBodyNote(const TwoBodyModel& model) {
+  std::string note;
+  for (const auto& [name, body, held] : {std::tuple<const char*, const fem::ElasticBody*, const char*>{
+                                             "obstacle", &model.obstacle(), "clamped"},
+                                         std::tuple<const char*, const fem::ElasticBody*, const char*>{
+                                             "tool", &model.tool(), "driven"}}) {
+    if (body->num_free_dofs() > 0) continue;
+    char text[320];
+    std::snprintf(text, sizeof(text),
+                  "%severy node of the %s (%d) is %s: it is rigid, and only the other body deforms (if a group "
+                  "names its volume, name the surface to hold instead)",
+                  note.empty() ? "" : "; ", name, body->mesh().num_nodes(), held);
+    note += text;
+  }
+  return note;
 }
 
 std::string LockingNote(const TwoBodyModel& model) {

@@ -212,4 +212,10 @@ std::string ReachNote(const TwoBodyModel& model, double device_reach_m, const st
 // at 0.4999: 18 times the force at 0.3, without a word); Tet10 elements do not. Empty otherwise.
 std::string LockingNote(const TwoBodyModel& model);
 
+// A note when a body has no free node: every node clamped (obstacle) or driven (tool), so it is
+// rigid and the contact's compliance is the other body's alone. Usually a group naming the
+// body's volume where its base was meant (a helper session clamped all 6 560 nodes of a
+// cylinder without a word). Empty otherwise.
+std::string RigidBodyNote(const TwoBodyModel& model);
+
 }  // namespace hapco::sim

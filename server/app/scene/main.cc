@@ -171,6 +171,7 @@ int Run(const Options& options) {
     double farthest_m = 0.0;
     for (const Eigen::Vector3d& d : scene.DeviceTrajectory()) farthest_m = std::max(farthest_m, d.norm());
     for (const std::string& note : {hapco::sim::StartingPositionNote(model), hapco::sim::ContactGroupsNote(model), hapco::sim::LockingNote(model),
+                                    hapco::sim::RigidBodyNote(model),
                                     hapco::sim::ReachNote(model, farthest_m, "the scene's trajectory"),
                                     hapco::sim::ReachNote(model, hapco::sim::PoseLimits{}.workspace_m,
                                                           "hapco-server's default --workspace-m")}) {

@@ -207,7 +207,7 @@ int Run(const Options& options) {
     }
     for (const std::string& note :
          {hapco::sim::StartingPositionNote(*models.back()), hapco::sim::ContactGroupsNote(*models.back()),
-          hapco::sim::LockingNote(*models.back()),
+          hapco::sim::LockingNote(*models.back()), hapco::sim::RigidBodyNote(*models.back()),
           hapco::sim::ReachNote(*models.back(), options.server.limits.workspace_m, "--workspace-m")}) {
       if (!note.empty()) std::printf("hapco-server: scene %s: note: %s\n", models.back()->scene().name.c_str(), note.c_str());
     }

@@ -384,6 +384,23 @@ TEST_F(MeshSceneTest, MissingPhysicalGroupIsNamedWithTheGroupsTheFileHas) {
   EXPECT_NE(message.find("(it has: base, organ, skin)"), std::string::npos) << message;
 }
 
+// A group the .geo defines but whose selection catches nothing is left out of the mesh by
+// Gmsh; "not in the file" sent a helper session looking for a typo that was not there.
+TEST_F(MeshSceneTest, APhysicalGroupThatSelectsNothingIsCalledEmptyNotMissing) {
+  std::string geo = ReadFile(std::string(HAPCO_SOURCE_DIR) + "/proto/scenes/meshes/organ.geo");
+  const std::string base_box = "BoundingBox{-41, -26, -0.01, 41, 26, 0.01}";
+  const auto at = geo.find(base_box);
+  ASSERT_NE(at, std::string::npos) << "organ.geo's base selection changed";
+  geo.replace(at, base_box.size(), "BoundingBox{-41, -26, -5.01, 41, 26, -4.99}");  // 5 mm below the base
+  const std::string path = std::string(::testing::TempDir()) + "hapco-empty-group-organ.geo";
+  std::ofstream(path) << geo;
+  const std::string message = OrganTipErrorWith("\"meshes/organ.geo\"", "\"" + path + "\"");
+  EXPECT_NE(message.find("obstacle.mesh.clamped_groups: physical group 'base' is defined in"), std::string::npos)
+      << message;
+  EXPECT_NE(message.find("but holds nothing"), std::string::npos) << message;
+  EXPECT_NE(message.find("(the mesh has: organ, skin)"), std::string::npos) << message;
+}
+
 TEST_F(MeshSceneTest, MeshFileIsResolvedFromTheSceneFolderAndAMissingOneIsNamed) {
   const std::string message = OrganTipErrorWith("meshes/organ.geo", "meshes/liver.geo");
   EXPECT_NE(message.find("obstacle.mesh.file: "), std::string::npos) << message;

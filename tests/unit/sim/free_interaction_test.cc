@@ -139,6 +139,7 @@ TEST(FreeInteractionTest, ToolWhollyOrDeeplyInsideTheObstacleIsRefusedWithItsDep
       EXPECT_NE(message.find("starts inside the obstacle"), std::string::npos) << message;
       EXPECT_NE(message.find(c.expected), std::string::npos) << message;
       EXPECT_NE(message.find("mm inside the"), std::string::npos) << message;
+      EXPECT_EQ(message.find("length_unit_m"), std::string::npos) << message;
     }
   }
   // The deepest node's distance: the cube's centre node (50, 10, 10) mm is 10 mm from the
@@ -152,6 +153,20 @@ TEST(FreeInteractionTest, ToolWhollyOrDeeplyInsideTheObstacleIsRefusedWithItsDep
     FAIL() << "accepted";
   } catch (const InputError& error) {
     EXPECT_NE(std::string(error.what()).find(" is 10 mm inside the obstacle"), std::string::npos) << error.what();
+  }
+  // A body far larger than a haptic scene (a mesh in mm read as m) gets a hint on the unit;
+  // the scene-sized cases above do not.
+  scene.tool.box.min_corner_m = {-0.95, -0.99, -0.99};
+  scene.tool.box.size_m = {2.0, 2.0, 2.0};
+  try {
+    const TwoBodyModel model(scene);
+    FAIL() << "accepted";
+  } catch (const InputError& error) {
+    const std::string message = error.what();
+    EXPECT_NE(message.find("the tool is 2 m across: if its mesh file is in millimetres, its mesh.length_unit_m is 0.001"),
+              std::string::npos)
+        << message;
+    EXPECT_EQ(message.find("the obstacle is"), std::string::npos) << message;
   }
   // Touching is not inside: resting on the bar, or against its end face from outside.
   EXPECT_NO_THROW(TwoBodyModel{BarScene(true)});
@@ -368,15 +383,24 @@ TEST(FreeInteractionTest, AToolLiftedClearAfterAPushIntoTheClampedEndFaceLetsGo)
       1e-4);
   double pushed_n = 0.0;
   int releases = 0;
+  double before_release_n = 0.0, released_n = 0.0;  // |F| of the step before, and as reported
   Eigen::Vector3d lifted_n = Eigen::Vector3d::Constant(1.0);
   for (std::size_t k = 1; k < path.size(); ++k) {
+    const double previous_n = pushed.last_output().contact_force_n.norm();
     const StepOutput& out = pushed.Step(path[k]);
     if (path[k].z() < -0.002) pushed_n = std::max(pushed_n, out.contact_force_n.norm());
-    releases += out.released ? 1 : 0;
+    if (out.released) {
+      ++releases;
+      before_release_n = previous_n;
+      released_n = out.released_force_n;
+    }
     lifted_n = out.contact_force_n;
   }
   EXPECT_GT(pushed_n, 100.0) << "the push into the rigid end face should be hard";
   EXPECT_EQ(releases, 1);
+  // The force dropped is reported (hapco-sim's summary tells a bent state from round-off by it).
+  EXPECT_GT(before_release_n, 1.0);
+  EXPECT_EQ(released_n, before_release_n);
   EXPECT_EQ(lifted_n.norm(), 0.0) << lifted_n.transpose();
   // Then across and 2 mm down onto the bar 10 mm from the clamp: as a fresh session's press.
   const Eigen::Vector3d over(-0.03, 0, 0.001), pressed(-0.03, 0, -0.002);
@@ -582,6 +606,18 @@ TEST(FreeInteractionTest, NearlyIncompressibleTet4BodiesAreNoted) {
   EXPECT_EQ(note.find("the tool"), std::string::npos) << note;
   scene.obstacle.box.order = fem::ElementOrder::kTet10;
   EXPECT_EQ(LockingNote(TwoBodyModel(scene)), "") << "Tet10 does not lock";
+}
+
+// A body with no free node is rigid (a helper session clamped a cylinder's volume group, all
+// 6 560 nodes, without a word): the tools say so.
+TEST(FreeInteractionTest, ABodyWithEveryNodeClampedIsNoted) {
+  SceneSpec scene = BarScene(/*clamp_both_ends=*/true, fem::ElementOrder::kTet4, {4, 2, 1});
+  EXPECT_EQ(RigidBodyNote(TwoBodyModel(scene)), "");
+  // One cell through the thickness: the top and bottom faces hold every node.
+  scene.obstacle.clamped_faces = {fem::BoxFace::kZMin, fem::BoxFace::kZMax};
+  const std::string note = RigidBodyNote(TwoBodyModel(scene));
+  EXPECT_NE(note.find("every node of the obstacle (30) is clamped: it is rigid"), std::string::npos) << note;
+  EXPECT_EQ(note.find("the tool"), std::string::npos) << note;
 }
 
 // A scene whose contact.reach_m is shorter than where the device may go says so (the tool
