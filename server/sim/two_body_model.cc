@@ -332,12 +332,6 @@ std::size_t BandedBytes(const fem::Mesh& mesh, std::vector<int> nodes, int axis,
   return sizeof(double) * 9 * blocks;
 }
 
-// A dense compliance of n surface nodes comes from the factor's dense Schur complement of
-// order 3n: (3n)^3 / 3 flops and 8 (3n)^2 bytes while the body is factored, then 72 n^2 bytes of
-// blocks. 2 000 nodes take seconds; a helper session's cylinder with its whole boundary in
-// contact (9 002 nodes) ran for minutes at 8 GB with nothing printed for the first 60 s. Said
-// before the factorization starts, with an estimate at the ~20 GFLOP/s measured here (benchmark
-// 1's reference: 3 170 nodes in 13 s), so a user can stop and name fewer contact faces.
 // For a message about the bodies' placement: a hint when a body is larger than a haptic scene
 // is (a helper session's tool read in mm as m was refused as "6022 mm deep" with no word on why).
 std::string LengthUnitHint(const fem::Mesh& obstacle_mesh, const fem::Mesh& tool_mesh) {
@@ -355,6 +349,12 @@ std::string LengthUnitHint(const fem::Mesh& obstacle_mesh, const fem::Mesh& tool
   return hint;
 }
 
+// A dense compliance of n surface nodes comes from the factor's dense Schur complement of
+// order 3n: (3n)^3 / 3 flops and 8 (3n)^2 bytes while the body is factored, then 72 n^2 bytes of
+// blocks. 2 000 nodes take seconds; a helper session's cylinder with its whole boundary in
+// contact (9 002 nodes) ran for minutes at 8 GB with nothing printed for the first 60 s. Said
+// before the factorization starts, with an estimate at the ~20 GFLOP/s measured here (benchmark
+// 1's reference: 3 170 nodes in 13 s), so a user can stop and name fewer contact faces.
 void ReportDenseComplianceCost(const std::string& name, std::size_t nodes) {
   if (nodes < 2000) return;
   const double order = 3.0 * static_cast<double>(nodes);
