@@ -526,6 +526,7 @@ void ContactDetector::TestTriangle(int triangle, const Eigen::Vector3d& x, int t
   }
   const FaceGeometry& g = face_geometry_[static_cast<std::size_t>(triangle)];
   if (!g.valid) return;
+  if (triangle_rise_m_ != nullptr) max_depth_m += 2.0 * (*triangle_rise_m_)[static_cast<std::size_t>(triangle)];
   const Eigen::Vector3d& n = g.normal;
   const Eigen::Vector3d ap = x - g.a;
   const double flat_gap_m = ap.dot(n);
@@ -562,17 +563,18 @@ void ContactDetector::TestTriangle(int triangle, const Eigen::Vector3d& x, int t
   candidate.barycentric = bary;
   candidate.persistent = previous_normal.dot(reference_n) >= parameters.persistence_min_cosine;
   candidate.outside = std::max(0.0, -projection.minCoeff());
+  candidate.max_depth_m = max_depth_m;
 }
 
 void ContactDetector::Select(int tool_index, const CollisionParameters& parameters,
                              std::vector<ContactPoint>* contacts) const {
   if (candidates_.empty()) return;
   // Faces in the persistence cone of the node's previous face first, at any depth; without
-  // one, only faces within max_penetration_m (a new contact).
+  // one, only faces within the pair's depth allowance (a new contact).
   const bool any_persistent =
       std::any_of(candidates_.begin(), candidates_.end(), [](const Candidate& c) { return c.persistent; });
   auto qualifies = [&](const Candidate& c) {
-    return any_persistent ? c.persistent : c.gap_m >= -parameters.max_penetration_m;
+    return any_persistent ? c.persistent : c.gap_m >= -c.max_depth_m;
   };
   // A face that holds the node's projection beats one reached only with the persistent slack
   // (a coplanar neighbour would otherwise tie on the gap and move the point to its edge).
@@ -650,10 +652,27 @@ void ContactDetector::Detect(const PointsRef& obstacle_positions_m,
                "one enabled flag per tool node");
   HAPCO_ASSERT(context.triangle_enabled == nullptr || context.triangle_enabled->size() == triangles_.size(),
                "one enabled flag per triangle");
+  HAPCO_ASSERT(context.triangle_rise_m == nullptr || context.triangle_rise_m->size() == triangles_.size(),
+               "one rise per triangle");
+  CollisionParameters box_parameters = parameters;
+  if (context.triangle_rise_m != nullptr) {
+    double rise_m = 0.0;
+    const auto face = [&](int t) { rise_m = std::max(rise_m, (*context.triangle_rise_m)[static_cast<std::size_t>(t)]); };
+    if (context.triangle_enabled != nullptr && context.enabled_triangles != nullptr) {
+      for (int t : *context.enabled_triangles) face(t);  // the faces near the tool only
+    } else {
+      for (int t = 0; t < static_cast<int>(triangles_.size()); ++t) {
+        if (context.triangle_enabled == nullptr || (*context.triangle_enabled)[static_cast<std::size_t>(t)]) face(t);
+      }
+    }
+    HAPCO_ASSERT(std::isfinite(rise_m) && rise_m >= 0.0, "triangle rises are finite and >= 0");
+    box_parameters.max_penetration_m += 2.0 * rise_m;
+  }
+  triangle_rise_m_ = context.triangle_rise_m;
   if (context.triangle_enabled != nullptr && context.enabled_triangles != nullptr) {
-    RefitEnabled(obstacle_positions_m, parameters, *context.enabled_triangles);
+    RefitEnabled(obstacle_positions_m, box_parameters, *context.enabled_triangles);
   } else {
-    Refit(obstacle_positions_m, parameters, context.triangle_enabled);
+    Refit(obstacle_positions_m, box_parameters, context.triangle_enabled);
   }
   ++detect_call_;  // every face's geometry is recomputed on its first test
   contacts->clear();
@@ -706,6 +725,7 @@ void ContactDetector::Detect(const PointsRef& obstacle_positions_m,
     }
     Select(static_cast<int>(i), parameters, contacts);
   }
+  triangle_rise_m_ = nullptr;
 }
 
 void ContactDetector::DetectBruteForce(const PointsRef& obstacle_positions_m,

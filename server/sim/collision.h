@@ -125,6 +125,12 @@ struct DetectionContext {
   // Then only their boxes and the tree nodes above them are refitted, so the detector's cost
   // follows the faces near the tool and not the surface's size.
   const std::vector<int>* enabled_triangles = nullptr;
+  // Optional, per obstacle triangle: how far the face's own deformation moved it outwards
+  // along its reference normal since the last detection, m (>= 0). The caller's bound on a
+  // new contact's depth (max_penetration_m) covers the device's travel; a pair on a face that
+  // rose by δ may be up to 2δ deeper: a face springs back up under a node once the load that
+  // pressed it down lets go. The tree's boxes grow by the largest allowance.
+  const std::vector<double>* triangle_rise_m = nullptr;
 };
 
 // Work counters of the last Detect call, for tests and benchmarks.
@@ -171,7 +177,8 @@ class ContactDetector {
   // With a context: nodes and faces disabled there are skipped; a node with a previous
   // triangle also tests that face and its corner neighbours with no depth limit and prefers,
   // among all faces that qualify, those within persistence_min_cosine of the previous face's
-  // normal (reference normals); without history the rules above apply unchanged.
+  // normal (reference normals); without history the rules above apply unchanged. With
+  // triangle rises, a face that rose by δ accepts gaps down to -(max_penetration + 2δ).
   void Detect(const PointsRef& obstacle_positions_m, const PointsRef& tool_positions_m,
               const CollisionParameters& parameters, std::vector<ContactPoint>* contacts,
               const DetectionContext& context = {});
@@ -210,6 +217,7 @@ class ContactDetector {
     Eigen::Vector3d barycentric = Eigen::Vector3d::Zero();
     bool persistent = false;  // within the persistence cone of the node's previous face
     double outside = 0.0;     // how far the projection lies outside the face (barycentric, >= 0)
+    double max_depth_m = 0.0;  // deepest gap this pair may have as a new contact, m
   };
 
   // A face's geometry in the current positions, computed once per Detect, on the face's first
@@ -275,6 +283,7 @@ class ContactDetector {
   bool refit_empty_elsewhere_ = false;  // every box outside refitted_* is empty
   std::vector<int> stack_;          // traversal stack, sized once
   std::vector<Candidate> candidates_;  // per-query scratch, capacity reused
+  const std::vector<double>* triangle_rise_m_ = nullptr;  // Detect's context, during the call
   // Faces sharing a corner with each face (itself included): CSR offsets and ids.
   std::vector<int> neighbour_offsets_, neighbours_;
   std::vector<Eigen::Vector3d> reference_normals_;  // per face, reference configuration

@@ -267,6 +267,13 @@ class TwoBodySession {
   std::vector<int> edge_node_slot_;  // edge node index -> obstacle surface slot
   double last_residual_penetration_m_ = 0.0;  // deepest u_n < 0 left by the last solve, m
   double max_new_depth_obstacle_m_ = 0.0, max_new_depth_tool_m_ = 0.0;  // half-body bounds, m
+  // Each obstacle surface slot's position at the detection it was last placed for (m) and that
+  // detection's number (detection_count_ then; 0: never), and per triangle how far its nodes
+  // moved outwards along its reference normal since the last detection (m, >= 0; DetectContacts).
+  std::vector<Eigen::Vector3d> obstacle_detected_m_;
+  std::vector<std::uint64_t> obstacle_detected_stamp_;
+  std::uint64_t detection_count_ = 1;  // detections so far + 1, + 2 at each reset or release
+  std::vector<double> face_rise_m_;
   std::vector<char> tool_is_slave_;  // per tool slot: a pass-1 slave this step
   std::vector<StepContact> contacts_;
   // Last world contact force per contact id (3 per id, N): the warm start; zero for ids not

@@ -2,6 +2,7 @@
 // goes, not only on the scene's scripted path. Checked against independent facts: the
 // per-step sparse solves (full-solve mode, with no broad phase), the FEM reactions K U − f at
 // the driven nodes, the direction of a face's normal, monotonic presses, no pass-through.
+#include <map>
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -440,14 +441,22 @@ TEST(FreeInteractionTest, AHeldPoseFlushWithAClampedEndSettles) {
   EXPECT_LT(*hi - *lo, 1e-3 * held_n.back()) << "held force between " << *lo << " and " << *hi << " N";
 }
 
+// The rigid tool at least 0.3 mm into benchmark 1's bar on every axis (bar [0, 100] x [0, 20] x
+// [0, 20] mm, the tool [40, 60] x [0, 20] x [20, 30] mm moved by the pose).
+bool ToolWellInsideTheBar(const Eigen::Vector3d& pose_m) {
+  const Eigen::Vector3d lo = Eigen::Vector3d(0.04, 0.0, 0.02) + pose_m, hi = Eigen::Vector3d(0.06, 0.02, 0.03) + pose_m;
+  const Eigen::Vector3d overlap = hi.cwiseMin(Eigen::Vector3d(0.1, 0.02, 0.02)) - lo.cwiseMax(Eigen::Vector3d::Zero());
+  return overlap.minCoeff() >= 0.0003;
+}
+
 // In past the clamped corner 2 mm below the top and on, diagonally, 4 mm deep across the bar
 // (a random path, seed 2, did this): the tool's side face bends the bar sideways far past
-// small strain, and the deformed configuration the detection works on stops meeting the tool:
-// it sat ~4 mm inside benchmark 1's bar with 0 N (66 steps of this path). Once the last
-// contact is lost with the tool inside, it re-enters by an approach from above, and holding
-// still at the end it has the force of a straight press to that pose (frictionless: one
-// contact state, the top face's).
-TEST(FreeInteractionTest, AToolThatPassedIntoTheBarReentersFromAbove) {
+// small strain. It once lost every contact on the way and sat ~4 mm inside benchmark 1's bar
+// with 0 N (66 steps of this path); since faces that spring back towards the tool may hold
+// deeper new contacts (TheFrictionlessSweepComesBack... below) the side contact holds on to the
+// end (the bar bent sideways: a second contact state of the pose, far outside small strain,
+// docs/free-interaction.md "Direction dependence"). Either way: never inside without a force.
+TEST(FreeInteractionTest, AToolPushedInFromTheSideBelowTheTopIsNeverInsideWithoutAForce) {
   SceneSpec scene = io::LoadSceneFile(std::string(HAPCO_SOURCE_DIR) + "/proto/scenes/benchmark1.txtpb");
   scene.friction_coefficient = 0.0;
   const TwoBodyModel model(scene);
@@ -455,16 +464,50 @@ TEST(FreeInteractionTest, AToolThatPassedIntoTheBarReentersFromAbove) {
   const Eigen::Vector3d inside(0.0174, 0.0001, -0.0043);
   const std::vector<Eigen::Vector3d> path = PolylinePath(
       {{0, 0, 0}, {0, 0, 0.001}, {0.0624, 0.0216, 0.001}, {0.0624, 0.0216, -0.0018}, inside}, 1e-4);
+  int inside_without_force = 0, inside_steps = 0;
+  for (std::size_t k = 1; k < path.size(); ++k) {
+    const StepOutput& out = session.Step(path[k]);
+    if (!ToolWellInsideTheBar(path[k])) continue;
+    ++inside_steps;
+    if (out.contact_force_n.isZero()) ++inside_without_force;
+  }
+  EXPECT_GT(inside_steps, 100);
+  EXPECT_EQ(inside_without_force, 0);
+}
+
+// The random path of seed 2 (scripts/random-trajectory --seed 2 --moves 8 --x-m 0.065 --y-m
+// 0.025 --z-m -0.006 0.002, its waypoints; frictionless) drives the tool in under the bar's
+// side y = 0 4.7 mm below the top and on along -x: the side contact fades out (215 N to 107 N
+// over 1 mm, the last contact lost) with the tool inside the bar. It re-enters as a session
+// opened there does (an approach from above), and holding still after that it has the force of
+// a straight press to that pose (frictionless: one contact state, the top face's).
+TEST(FreeInteractionTest, AToolThatLostItsLastContactInsideTheBarReentersFromAbove) {
+  SceneSpec scene = io::LoadSceneFile(std::string(HAPCO_SOURCE_DIR) + "/proto/scenes/benchmark1.txtpb");
+  scene.friction_coefficient = 0.0;
+  const TwoBodyModel model(scene);
+  TwoBodySession session(model);
+  // The script's path to half-way along its last move (its poses exactly: the side contact's
+  // fading is sensitive to them), ending at (-33.8, -6.8, -4.6) mm.
+  std::vector<Eigen::Vector3d> path = PolylinePath({{0, 0, 0},
+                                                    {0.05928445534560242, 0.022391374352967473, -0.0055475890581855305},
+                                                    {-0.05396664062934019, 0.01677494390647248, -0.00011224008745181358},
+                                                    {0.022064952187228717, -0.00959317712054279, -0.0011524466745723005},
+                                                    {0.013884225373308925, 0.004060200855600153, -0.004732937037961555},
+                                                    {-0.009012946762135078, -0.0053234089897314305, -0.00021590335010027335},
+                                                    {0.06432654318346656, 0.022469773654662177, -0.0016465836205654333},
+                                                    {-0.007168955465639032, -0.011587962917533596, -0.005712605364857139},
+                                                    {-0.06143216857819353, -0.0017553068951343953, -0.0034522789771705806}},
+                                                   1e-4);
+  const auto half_way = std::find_if(path.begin() + static_cast<std::ptrdiff_t>(path.size() / 2), path.end(),
+                                     [](const Eigen::Vector3d& d) { return d.x() <= -0.0338; });
+  ASSERT_NE(half_way, path.end());
+  path.erase(half_way + 1, path.end());
+  const Eigen::Vector3d inside = path.back();
   int reentries = 0, inside_without_force = 0;
   for (std::size_t k = 1; k < path.size(); ++k) {
     const StepOutput& out = session.Step(path[k]);
     reentries += out.reentered ? 1 : 0;
-    // The rigid tool at least 0.3 mm into the bar on every axis (bar [0, 100] x [0, 20] x
-    // [0, 20] mm, the tool [40, 60] x [0, 20] x [20, 30] mm moved by the pose).
-    const Eigen::Vector3d lo = Eigen::Vector3d(0.04, 0.0, 0.02) + path[k], hi = Eigen::Vector3d(0.06, 0.02, 0.03) + path[k];
-    const Eigen::Vector3d overlap =
-        hi.cwiseMin(Eigen::Vector3d(0.1, 0.02, 0.02)) - lo.cwiseMax(Eigen::Vector3d::Zero());
-    if (overlap.minCoeff() >= 0.0003 && out.contact_force_n.isZero()) ++inside_without_force;
+    if (ToolWellInsideTheBar(path[k]) && out.contact_force_n.isZero()) ++inside_without_force;
   }
   for (int k = 0; k < 200 && session.approaching(); ++k) session.Step(inside);  // the device holds still
   EXPECT_EQ(inside_without_force, 0);
@@ -955,12 +998,58 @@ TEST(FreeInteractionTest, APoseNextToAClampedEndHasOneForceWhicheverWayItIsReach
   const HeldPoseRun pressed = RunHeldPosePath(model, "b1_x100_e0.1_y0_d3");
   const HeldPoseRun slid = RunHeldPosePath(model, "b1_x100_e0.1_y0_d3_altx");
   // (The straight press has one step at 0.7 mm that hits max-iterations, with either gap: the
-  // singular zone next to a clamped end, docs/free-interaction.md "Next to the clamps".)
+  // singular zone next to a clamped end, docs/free-interaction.md "Next to the clamps"; so has
+  // the slide since faces that spring back hold deeper new contacts, at 2.6 kN, 1.7e-6 m
+  // against the 1e-6 m tolerance.)
   EXPECT_LE(pressed.unconverged, 1);
   EXPECT_EQ(pressed.unconverged_held, 0);
-  EXPECT_EQ(slid.unconverged, 0);
+  EXPECT_LE(slid.unconverged, 1);
   EXPECT_GT(pressed.force_n.back(), 1000.0);
   EXPECT_NEAR(slid.force_n.back(), pressed.force_n.back(), 0.005 * pressed.force_n.back());
+}
+
+// Frictionless, the 3 mm top sweep pushes the tool flush against the clamped end x = 0 (kN: the
+// clamped edge holds the tool's rim up ~3 mm) and comes back. The faces next to the clamp that
+// the rim's last loads dimpled spring back up under it; the detector refused those pairs as
+// new contacts deeper than the step's travel allows, and three rim nodes sat in the bar without
+// contact until the tool was 11.7 mm from the clamp: 2 mm from it the way back gave 119.4 N
+// where the way out gave 171.4 N, and 15 % from one step to the next where they came back. A
+// face that rose since the last detection now holds new contacts that much deeper.
+TEST(FreeInteractionTest, TheFrictionlessSweepComesBackFromAClampedEndWithTheWayOutsForce) {
+  SceneSpec scene = io::LoadSceneFile(std::string(HAPCO_SOURCE_DIR) + "/proto/scenes/benchmark1.txtpb");
+  scene.friction_coefficient = 0.0;
+  const TwoBodyModel model(scene);
+  TwoBodySession session(model);
+  // Tool home x in [40, 60] mm: dx = -40 mm is flush with the clamped end, -38 mm is 2 mm from it.
+  constexpr double kStepM = 1e-4, kDepthM = -3e-3;
+  std::vector<Eigen::Vector3d> path;
+  for (int k = 1; k <= 30; ++k) path.emplace_back(0.0, 0.0, kDepthM * k / 30);
+  for (int k = 1; k <= 400; ++k) path.emplace_back(-kStepM * k, 0.0, kDepthM);
+  for (int k = 1; k <= 120; ++k) path.emplace_back(-0.04 + kStepM * k, 0.0, kDepthM);
+  std::map<long, std::vector<double>> force_at_dx_n;  // by dx in 0.1 mm, on the slide
+  std::vector<double> back_n;
+  double peak_n = 0.0;
+  for (std::size_t k = 0; k < path.size(); ++k) {
+    const StepOutput& out = session.Step(path[k]);
+    const double f = out.contact_force_n.norm();
+    peak_n = std::max(peak_n, f);
+    if (k >= 30) force_at_dx_n[std::lround(path[k].x() / kStepM)].push_back(f);
+    if (k >= 430) back_n.push_back(f);
+  }
+  EXPECT_GT(peak_n, 1000.0);  // the flush push reached the clamped edge
+  for (long dx : {-380L, -370L, -350L, -320L, -300L}) {  // 2, 3, 5, 8, 10 mm from the clamp
+    const std::vector<double>& f = force_at_dx_n[dx];
+    ASSERT_EQ(f.size(), 2u) << dx;
+    EXPECT_NEAR(f[1], f[0], 0.02 * f[0]) << "tool " << (400 + dx) / 10.0 << " mm from the clamp: out " << f[0]
+                                         << " N, back " << f[1] << " N";
+  }
+  // Smooth on the way back once the tool is 5 mm from the clamp (the first 5 mm: the release
+  // from the clamped edge, kN to ~150 N).
+  double largest = 0.0;
+  for (std::size_t k = 51; k < back_n.size(); ++k) {
+    largest = std::max(largest, std::abs(back_n[k] - back_n[k - 1]) / std::max(back_n[k], back_n[k - 1]));
+  }
+  EXPECT_LT(largest, 0.05);
 }
 
 }  // namespace
