@@ -247,6 +247,7 @@ ContactDetector::ContactDetector(std::vector<fem::SurfaceTriangle> obstacle_tria
     }
     centroids[static_cast<std::size_t>(t)] = (a + b + c) / 3.0;
     reference_normals_.push_back((b - a).cross(c - a).normalized());
+    reference_corners_m_.push_back({a, b, c});
     edge_sum_m += (b - a).norm() + (c - b).norm() + (a - c).norm();
   }
   tie_tolerance_m_ = kTieRelative * edge_sum_m / (3.0 * n_tri);
@@ -526,6 +527,7 @@ void ContactDetector::TestTriangle(int triangle, const Eigen::Vector3d& x, int t
   }
   const FaceGeometry& g = face_geometry_[static_cast<std::size_t>(triangle)];
   if (!g.valid) return;
+  const double travel_depth_m = max_depth_m;  // the caller's bound, before the face's rise
   if (triangle_rise_m_ != nullptr) max_depth_m += 2.0 * (*triangle_rise_m_)[static_cast<std::size_t>(triangle)];
   const Eigen::Vector3d& n = g.normal;
   const Eigen::Vector3d ap = x - g.a;
@@ -554,6 +556,14 @@ void ContactDetector::TestTriangle(int triangle, const Eigen::Vector3d& x, int t
     }
     gap_m = (x - point_m).dot(n);
     if (!(gap_m < parameters.activation_gap_m && gap_m >= -max_depth_m)) return;
+  }
+  if (gap_m < -travel_depth_m) {
+    // Deeper than the travel bound, on the face's rise alone: only over the face as it was
+    // undeformed. A face with a corner on a clamped edge and another pressed 3 mm down tilts
+    // by 27°, and along that tilt a tool node beyond the clamped end (x < 0, in air) projected
+    // into it 4.4 mm "deep" and took 448 N (docs/free-interaction.md, "Faces that spring back").
+    const auto& corners = reference_corners_m_[static_cast<std::size_t>(triangle)];
+    if (!(ProjectionBarycentric(x, corners[0], corners[1], corners[2]).minCoeff() >= -edge_tolerance)) return;
   }
   Candidate& candidate = candidates_.emplace_back();
   candidate.triangle = triangle;

@@ -129,7 +129,9 @@ struct DetectionContext {
   // along its reference normal since the last detection, m (>= 0). The caller's bound on a
   // new contact's depth (max_penetration_m) covers the device's travel; a pair on a face that
   // rose by δ may be up to 2δ deeper: a face springs back up under a node once the load that
-  // pressed it down lets go. The tree's boxes grow by the largest allowance.
+  // pressed it down lets go. Only for a node over the face's undeformed triangle (a deformed
+  // face can tilt far enough to reach under a node beyond the body). The tree's boxes grow by
+  // the largest allowance.
   const std::vector<double>* triangle_rise_m = nullptr;
 };
 
@@ -178,7 +180,8 @@ class ContactDetector {
   // triangle also tests that face and its corner neighbours with no depth limit and prefers,
   // among all faces that qualify, those within persistence_min_cosine of the previous face's
   // normal (reference normals); without history the rules above apply unchanged. With
-  // triangle rises, a face that rose by δ accepts gaps down to -(max_penetration + 2δ).
+  // triangle rises, a face that rose by δ accepts gaps down to -(max_penetration + 2δ), the
+  // part beyond max_penetration only for a node over the face's undeformed triangle.
   void Detect(const PointsRef& obstacle_positions_m, const PointsRef& tool_positions_m,
               const CollisionParameters& parameters, std::vector<ContactPoint>* contacts,
               const DetectionContext& context = {});
@@ -287,6 +290,7 @@ class ContactDetector {
   // Faces sharing a corner with each face (itself included): CSR offsets and ids.
   std::vector<int> neighbour_offsets_, neighbours_;
   std::vector<Eigen::Vector3d> reference_normals_;  // per face, reference configuration
+  std::vector<std::array<Eigen::Vector3d, 3>> reference_corners_m_;  // per face, reference configuration, m
   std::vector<FaceGeometry> face_geometry_;         // per face, current positions
   std::vector<std::uint64_t> face_geometry_call_;   // per face: the Detect call it is from
   std::uint64_t detect_call_ = 0;                   // Detect/DetectBruteForce calls so far

@@ -613,6 +613,41 @@ TEST(ContactDetectorTest, RefitOfTheEnabledFacesOnlyFindsWhatTheFlagsFind) {
   EXPECT_GT(compared, 800u);
 }
 
+// A face that rose since the last detection may hold a new contact up to twice the rise deeper
+// than max_penetration_m (a bar face springing back up under a tool node once the load that
+// pressed it goes), but only over its undeformed triangle: a face tilted by the deformation
+// reaches under points beyond the body's end, which are in air.
+TEST(ContactDetectorTest, ARisenFaceHoldsDeeperNewContactsOnlyOverItsUndeformedTriangle) {
+  const fem::Mesh mesh = fem::MakeBoxMesh(ObstacleSpec(fem::ElementOrder::kTet4));
+  const std::vector<fem::SurfaceTriangle> faces = fem::BoundaryTriangles(mesh);
+  // The top tilted by -27° along x (z -= x/2 on the top): the end x = 0 stays, the rest dips.
+  Points obstacle = mesh.nodes_m;
+  for (Eigen::Index i = 0; i < obstacle.rows(); ++i) obstacle(i, 2) -= 0.5 * obstacle(i, 0) * obstacle(i, 2) / 0.02;
+  // Over the undeformed top at x = 3 mm, 2 mm under the dipped top (gap -2/sqrt(1.25) mm), and
+  // beyond the end x = 0 at x = -1 mm, 5 mm below the top: the tilted plane's normal projects it
+  // onto the top's first cell 4.9 mm "deep".
+  const Points tool = ToPoints({{0.003, 0.0071, 0.02 - 0.0015 - 0.002}, {-0.001, 0.0071, 0.015}});
+  ContactDetector detector(faces, mesh.nodes_m, Iota(tool.rows()));
+  CollisionParameters parameters;
+  parameters.max_penetration_m = 1e-3;
+  std::vector<ContactPoint> contacts;
+  detector.Detect(obstacle, tool, parameters, &contacts);
+  EXPECT_TRUE(contacts.empty()) << "both are deeper than max_penetration_m";
+  const std::vector<double> risen(faces.size(), 2.5e-3);  // allows 1 + 5 mm
+  DetectionContext context;
+  context.triangle_rise_m = &risen;
+  detector.Detect(obstacle, tool, parameters, &contacts, context);
+  ASSERT_EQ(contacts.size(), 1u);
+  EXPECT_EQ(contacts[0].tool_node, 0);
+  EXPECT_NEAR(contacts[0].gap_m, -2e-3 / std::sqrt(1.25), 1e-9);
+  ExpectWellFormed(contacts[0], obstacle, tool);
+  // With a smaller rise the node under the top is too deep again.
+  const std::vector<double> little(faces.size(), 0.2e-3);  // allows 1.4 mm
+  context.triangle_rise_m = &little;
+  detector.Detect(obstacle, tool, parameters, &contacts, context);
+  EXPECT_TRUE(contacts.empty());
+}
+
 TEST(StaticBoxTreeTest, OverlapQueriesMatchATestOfEveryBox) {
   std::mt19937 rng(4);
   std::uniform_real_distribution<double> corner(0.0, 1.0), size(0.0, 0.05);
