@@ -426,14 +426,15 @@ void TwoBodySession::DetectContacts(const Eigen::Vector3d& device_translation_m)
   // springs back, the faces next to the clamp dimpled by the rim's last loads spring back up
   // under it, and three rim nodes sat in the bar without contact until the tool was 11.7 mm
   // from the clamp: 30 % below the way out's force 2 mm from the clamp, 15-18 % from one step
-  // to the next where they came back. A face that rose by δ since
-  // the last detection may hold a new contact up to δ deeper than the travel allows (twice,
-  // as that bound; ContactDetector, DetectionContext), the total never past half the obstacle.
-  // Per face: the most any of its nodes moved outwards along its reference normal (a face no
-  // node of which was placed at the last detection gets none: it was far from the tool). Only
-  // the faces the broad phase kept are measured and searched: one that sprang back under the
-  // tool's nodes is among them (BroadPhase grows each face by how far it can have moved).
-  // Measured on paths nobody wrote: see docs/free-interaction.md, "Faces that spring back".
+  // to the next where they came back. A face that rose by δ since the last detection may hold
+  // a new contact up to δ deeper than the travel allows (twice, as that bound), the total never
+  // past half the obstacle, and only for a node over the face's undeformed triangle
+  // (ContactDetector::TestTriangle, DetectionContext::triangle_rise_m). Per face: the most
+  // any of its nodes moved outwards along its reference normal (a face no node of which was
+  // placed at the last detection gets none: it was far from the tool). Only the faces the
+  // broad phase kept are measured and searched: one that sprang back under the tool's nodes
+  // is among them (BroadPhase grows each face by how far it can have moved). Measured on
+  // paths nobody wrote: docs/free-interaction.md, "Faces that spring back".
   const double rise_cap_m = 0.5 * std::max(0.0, max_new_depth_obstacle_m_ - tool_pass_parameters_.max_penetration_m);
   const auto& obstacle_nodes = obstacle_surface_.nodes;
   const auto& triangles = obstacle_surface_.triangles;
