@@ -4,14 +4,20 @@
 # bridge (one subnet, no multicast: Cyclone's peer list), all on one DDS domain. The clients
 # spread over the servers; once every client is being answered, the busiest server is killed
 # (SIGKILL: a host gone). Asserts, from the servers' --trace files and the phantoms' per-tick
-# CSVs: every client ends on a live server; its ticks without a new force after the kill last at
-# most the safety timeout (50 ms) + 100 ms; no pose of any client is stepped by two servers; every
-# rendered force is finite, within 7.9 N and within 0.25 N of the tick before. Synchronisation is
+# CSVs: every client ends on a live server; a client of the killed server takes a force from
+# another server at most the safety timeout (50 ms) + 100 ms after the killed server's last
+# (the failover, on the device); no pose of any client is stepped by two servers; every rendered
+# force is finite, within 7.9 N and within 0.25 N of the tick before. When only the failover
+# bound is missed (every other assertion held), the scenario runs once more from the start and
+# a second miss fails: on a 2-core host a process that gets no CPU for 100 ms looks dead, and a
+# moved client's time then measures the host, not the failover (docs/several-servers.md). The
+# clients' logs (moves, resumptions, leases) are printed with any failure. Synchronisation is
 # on files the processes write (bounded polls), never on fixed sleeps. Needs root: exit 77 else.
 #
 # usage: several_servers_test.sh HAPCO_SERVER HAPCO_PHANTOM SOURCE_DIR WORKDIR
 set -u
 SERVER=$1 PHANTOM=$2 SRC=$3 WORK=$4
+SELF=$(readlink -f "$0")  # for the second attempt, after the cd below
 PY=/usr/bin/python3
 SCENE=$SRC/tests/data/scenes/coarse.txtpb
 CLIENTS=6
@@ -154,10 +160,11 @@ for k in $(seq 1 $CLIENTS); do
   grep -q "served by '$BUSIEST' at the end" "$WORK/phantom-$k.out" && fail "phantom-$k still on the killed $BUSIEST"
   grep -q "served by 's" "$WORK/phantom-$k.out" || fail "phantom-$k: no server at the end: $(tail -2 "$WORK/phantom-$k.out")"
 done
-$PY - "$WORK" "$CLIENTS" "$BUSIEST" <<'PYEOF' || FAILS=$((FAILS + 1))
+PY_RC=0
+$PY - "$WORK" "$CLIENTS" "$BUSIEST" <<'PYEOF' || PY_RC=$?
 import csv, glob, math, os, sys
 work, clients, killed = sys.argv[1], int(sys.argv[2]), sys.argv[3]
-bad = 0
+bad, slow = 0, 0
 # No pose stepped by two servers (the killed server's trace may end in a partial line).
 stepped = {}
 for path in sorted(glob.glob(os.path.join(work, "trace-s*.csv"))):
@@ -200,7 +207,8 @@ for k in range(1, clients + 1):
             if change > allowed + 5e-4:  # time_s has 1 us resolution: 250 N/s x 2 us
                 print(f"FAIL: {name} tick {t} changes by {change:.3f} N (limit {allowed:.3f})"); bad += 1; break
         last, last_time = f, ticks[t][0]
-    # The longest run of ticks without a new force, after the first force: timeout + move.
+    # The longest run of ticks without a new force, after the first force (printed: a live
+    # server's stall on a loaded host shows here too, and moves a client by the same rules).
     gap, run_start, first = 0.0, None, False
     for t in order:
         time_s, seq, _ = ticks[t]
@@ -208,18 +216,60 @@ for k in range(1, clients + 1):
             if first and run_start is not None:
                 gap = max(gap, time_s - run_start)
             first, run_start = True, time_s
-    moved = len(by_client.get(name, set())) > 1
-    print(f"{name}: servers {sorted(by_client.get(name, set()))}, longest time without a force {gap * 1e3:.1f} ms")
-    if moved and gap > 0.050 + 0.100:
-        print(f"FAIL: {name} waited {gap * 1e3:.1f} ms for its new server (limit 150 ms)"); bad += 1
+    # The failover, on the device: from the tick that took the killed server's last force to
+    # the first tick that took another server's (forces matched to the servers' traces).
+    last_killed, resumed = None, None
+    for t in order:
+        time_s, seq, _ = ticks[t]
+        if seq < 0:
+            continue
+        server = stepped.get((name, str(seq)))
+        if server == killed:
+            last_killed, resumed = time_s, None
+        elif server is not None and last_killed is not None and resumed is None:
+            resumed = time_s
+    line = f"{name}: servers {sorted(by_client.get(name, set()))}, longest time without a force {gap * 1e3:.1f} ms"
+    if last_killed is not None and resumed is not None:
+        failover = resumed - last_killed
+        print(f"{line}, failover {failover * 1e3:.1f} ms (last force of {killed} at {last_killed:.3f} s)")
+        if failover > 0.050 + 0.100:
+            print(f"TIMING: {name} waited {failover * 1e3:.1f} ms for its new server (limit 150 ms)")
+            slow += 1
+    else:
+        print(line)
+        if last_killed is not None:
+            print(f"FAIL: {name} had no force from another server after {killed}'s last at {last_killed:.3f} s"); bad += 1
 if not any(killed in s for s in by_client.values()):
     print(f"FAIL: no client was on {killed}"); bad += 1
 if not any(len(s) > 1 and killed in s for s in by_client.values()):
     print(f"FAIL: no client moved away from {killed}"); bad += 1
-sys.exit(1 if bad else 0)
+# 1: a correctness failure; 3: only the failover took longer than its bound.
+sys.exit(1 if bad else 3 if slow else 0)
 PYEOF
-if [ "$FAILS" != 0 ]; then
-  for k in 1 2 3; do echo "--- server s$k"; tail -3 "$WORK/server-s$k.err"; done
-  echo "several_servers: $FAILS failure(s)"; exit 1
+# What each client logged about its server (moves, timeouts, resumptions): says which phase
+# took the time when a bound is missed.
+client_logs() {
+  for k in $(seq 1 $CLIENTS); do
+    grep -h "moving from\|no force for\|forces resumed\|no other server" "$WORK/phantom-$k.err" 2>/dev/null | sed "s/^/  /"
+    grep -h "served by" "$WORK/phantom-$k.out" 2>/dev/null | sed "s/^ */  phantom-$k: /"
+  done
+}
+if [ "$PY_RC" = 3 ] && [ "$FAILS" = 0 ] && [ "${HAPCO_SEVERAL_SERVERS_ATTEMPT:-1}" = 1 ]; then
+  # Only the failover bound was missed, every other assertion held: a host too busy for the
+  # bound this once (a stalled client or server process looks like a dead one; the load test
+  # docs/several-servers.md measures how often) or a slower failover. The scenario runs once
+  # more from the start; a second miss fails. Both attempts' numbers are printed.
+  echo "--- client logs of attempt 1"; client_logs
+  echo "several_servers: the failover bound was missed on attempt 1 (load: $(cut -d' ' -f1-3 /proc/loadavg)); once more"
+  cleanup
+  trap - EXIT
+  rm -rf "$WORK.attempt1" && mv "$WORK" "$WORK.attempt1"
+  HAPCO_SEVERAL_SERVERS_ATTEMPT=2 exec bash "$SELF" "$SERVER" "$PHANTOM" "$SRC" "$WORK"
 fi
-echo "several_servers: passed"
+[ "$PY_RC" != 0 ] && FAILS=$((FAILS + 1))
+if [ "$FAILS" != 0 ]; then
+  echo "--- client logs"; client_logs
+  for k in 1 2 3; do echo "--- server s$k"; tail -3 "$WORK/server-s$k.err"; done
+  echo "several_servers: $FAILS failure(s) (load: $(cut -d' ' -f1-3 /proc/loadavg))"; exit 1
+fi
+echo "several_servers: passed (attempt ${HAPCO_SEVERAL_SERVERS_ATTEMPT:-1})"
