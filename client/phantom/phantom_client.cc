@@ -349,6 +349,25 @@ std::string PhantomClient::ChooseServer(const std::string& avoid) {
       .value_or(std::string());
 }
 
+std::string PhantomClient::DescribeServers(int64_t now_ns) {
+  std::lock_guard<std::mutex> lock(dds_->servers_mutex);
+  std::string text;
+  for (const service::ServerAnnouncement& s : dds_->servers) {
+    char line[200];
+    const double heard_s = static_cast<double>(now_ns - s.heard_ns) * 1e-9;
+    if (s.lease_lapsed) {
+      std::snprintf(line, sizeof line, "%s (lease lapsed %.0f ms ago, heard %.1f s ago, %u/%u sessions)",
+                    s.server_id.c_str(), static_cast<double>(now_ns - s.lapsed_ns) * 1e-6, heard_s, s.sessions,
+                    s.max_sessions);
+    } else {
+      std::snprintf(line, sizeof line, "%s (heard %.1f s ago, %u/%u sessions)", s.server_id.c_str(), heard_s,
+                    s.sessions, s.max_sessions);
+    }
+    text += (text.empty() ? "" : ", ") + std::string(line);
+  }
+  return text.empty() ? "no server announced itself" : text;
+}
+
 bool PhantomClient::ServerLeaseLapsedAndTrusted(const std::string& server_id, int64_t now_ns,
                                                  bool silent_twice_timeout, int64_t last_force_ns) {
   std::lock_guard<std::mutex> lock(dds_->servers_mutex);
@@ -410,6 +429,7 @@ void PhantomClient::Run(const std::atomic<bool>& stop, const std::function<void(
   bool any_force = false, was_stale = false;
   double last_notice_log_s = -1;  // when the last "server ignores poses" line was logged
   double last_foreign_log_s = -1;  // when the last "forces for poses never sent" line was logged
+  double last_no_server_log_s = -1;  // when the last "no other server to move to" line was logged
   double last_stale_answer_log_s = -1;  // when the last "answers to poses ... old" line was logged
   double last_waiting_log_s = -1;       // when the last "still no force" line was logged
   double stale_since_s = 0;             // when the current force timeout began
@@ -663,6 +683,11 @@ void PhantomClient::Run(const std::atomic<bool>& stop, const std::function<void(
         ++stats_.server_moves;
         SendJoin();
         std::snprintf(pose.server_id, sizeof(pose.server_id), "%s", server_id_.c_str());
+      } else if (log && LogDue(&last_no_server_log_s, now_s)) {
+        char when[32];
+        std::snprintf(when, sizeof when, "t=%.3f s", now_s);
+        log(std::string(when) + ": no other server to move to from '" + server_id_ + "' (servers heard: " +
+            DescribeServers(now) + ")");
       }
     }
     if (on_tick) {

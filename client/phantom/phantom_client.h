@@ -177,6 +177,9 @@ class PhantomClient {
   std::string ChooseServer(const std::string& avoid);
   // Why no server opened a session, from the servers' announcements (for Connect's message).
   std::string WhyNoSession();
+  // The servers heard, for a log line: "s1 (lease lapsed 120 ms ago, heard 0.3 s ago, 2/32
+  // sessions), ..." (a move that found no other server says why).
+  std::string DescribeServers(int64_t now_ns);
   // True while the DDS liveliness lease of `server_id`'s announcements has lapsed (the
   // process is gone or frozen; qos.h kServerLivelinessLeaseNs) and lapses can be trusted: no
   // server's lease has lapsed and come back within kLeaseDistrustNs, or `silent_twice_timeout`

@@ -74,9 +74,11 @@ LeaseChange RecordAnnouncement(std::vector<ServerAnnouncement>& servers, ServerA
                                std::size_t max_servers);
 
 // Chooses the server for `client_id` joining `scene` ("" = the server's first scene): among
-// the servers heard within max_age_ns of now_ns whose lease has not lapsed, that serve the scene and have a free session,
-// not `avoid` (the server a client leaves) unless it is the only one, the one with the
-// smallest fill (sessions / max_sessions). Ties are broken by rendezvous hashing of
+// the servers heard within max_age_ns of now_ns whose lease has not lapsed, that serve the
+// scene and have a free session, not `avoid` (the server a client leaves) unless it is the
+// only one, the one with the smallest fill (sessions / max_sessions); when every such server's
+// lease has lapsed (the client's own stall makes them all lapse at once), one of those other
+// than `avoid`. Ties are broken by rendezvous hashing of
 // (client id, server id), so clients that join at once, all reading the same announcements,
 // spread over the servers instead of all choosing the first. nullopt: no server qualifies.
 std::optional<std::string> ChooseServer(std::span<const ServerAnnouncement> servers, std::string_view client_id,

@@ -115,6 +115,33 @@ TEST(ChooseServer, ALeaseThatLapsedDuringASilenceCountsEvenAfterItCameBack) {
   EXPECT_TRUE(LeaseLapsedSince(servers[0], kNow));
 }
 
+// A client whose own DDS threads stalled sees every server's lease lapse at once. Leaving its
+// (killed) server it takes another heard recently rather than none; a live one still comes
+// first, and the avoided server is taken again only while it is the only live one.
+TEST(ChooseServer, WhenEveryLeaseLooksLapsedAnotherRecentlyHeardServerIsChosen) {
+  std::vector<ServerAnnouncement> servers = {Server("s1", 2), Server("s2", 1), Server("s3", 2),
+                                             Server("old", 0, 16, {"bench1"}, kNow - 2 * kMaxAge)};
+  for (uint64_t k = 0; k < servers.size(); ++k) {
+    servers[k].writer_handle = 11 + k;
+    ASSERT_EQ(ApplyLivelinessChange(servers, 11 + k, -1, kNow), LeaseChange::kLapsed);
+  }
+  EXPECT_EQ(ChooseServer(servers, "c", "bench1", "s3", kNow, kMaxAge), "s2") << "the least filled lapsed other";
+  EXPECT_EQ(ChooseServer(servers, "c", "bench1", "", kNow, kMaxAge), "s2");
+  EXPECT_FALSE(ChooseServer(servers, "c", "other-scene", "s3", kNow, kMaxAge).has_value());
+  // Never one heard longer ago than the age limit, nor the avoided one while it is lapsed.
+  servers[1].heard_ns = kNow - 2 * kMaxAge;
+  EXPECT_EQ(ChooseServer(servers, "c", "bench1", "s3", kNow, kMaxAge), "s1");
+  servers[0].heard_ns = kNow - 2 * kMaxAge;
+  EXPECT_FALSE(ChooseServer(servers, "c", "bench1", "s3", kNow, kMaxAge).has_value());
+  // A live server, even the avoided one, comes before any lapsed one.
+  servers[0].heard_ns = kNow;
+  ASSERT_EQ(ApplyLivelinessChange(servers, 13, +1, kNow), LeaseChange::kRegained);  // s3 back
+  EXPECT_EQ(ChooseServer(servers, "c", "bench1", "s3", kNow, kMaxAge), "s3");
+  servers[2].sessions = 15;
+  ASSERT_EQ(ApplyLivelinessChange(servers, 11, +1, kNow), LeaseChange::kRegained);  // s1 back
+  EXPECT_EQ(ChooseServer(servers, "c", "bench1", "", kNow, kMaxAge), "s1");
+}
+
 TEST(ChooseServer, ClientsJoiningAtOnceSpreadOverEquallyLoadedServers) {
   // Every client reads the same announcements (all empty): the tie-break must not send them
   // all to one server. 300 ids over three servers: each gets a share near a third.
